@@ -1,0 +1,1 @@
+//! Episodes on disk: schema, mcap I/O, RLDS import, windows. (Not built yet: see the data issue.)

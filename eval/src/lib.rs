@@ -1,0 +1,1 @@
+//! Closed-loop evaluation. (Not built yet: see the eval issue.)

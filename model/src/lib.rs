@@ -1,0 +1,1 @@
+//! Embodied-SlotSSM and its baselines in Burn. (Not built yet: see the model issue.)

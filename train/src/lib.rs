@@ -1,0 +1,1 @@
+//! Training loop. (Not built yet: see the train issue.)
