@@ -1,1 +1,8 @@
-//! The world.
+//! The world: MuJoCo 2.2.2 through FFI, offscreen rendering, a Franka Panda with LIBERO's OSC_POSE
+//! controller, and a minimal environment.
+//!
+//! Layers, bottom up: [`mujoco`] (the only `unsafe`, raw FFI + safe `Model`/`Data`), [`render`]
+//! (EGL surfaceless offscreen rendering: RGB, depth, segmentation), [`robot`] (the Panda MJCF and its
+//! constants), [`controller`] (OSC_POSE and the gripper ramp), [`env`] (reset/step/observe).
+
+pub mod mujoco;

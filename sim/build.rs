@@ -1,0 +1,16 @@
+//! Links Debian's libmujoco (2.2.2); EGL and GL are opened at run time (see `render`).
+fn main() {
+    println!("cargo:rerun-if-changed=build.rs");
+    let candidates = [
+        "/usr/lib/x86_64-linux-gnu/libmujoco.so",
+        "/usr/lib/aarch64-linux-gnu/libmujoco.so",
+        "/usr/lib/libmujoco.so",
+        "/usr/local/lib/libmujoco.so",
+    ];
+    if !candidates.iter().any(|p| std::path::Path::new(p).exists()) {
+        println!(
+            "cargo:warning=libmujoco.so not found: install Debian's MuJoCo 2.2.2 with `apt-get install libmujoco-dev`"
+        );
+    }
+    println!("cargo:rustc-link-lib=dylib=mujoco");
+}
