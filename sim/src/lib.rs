@@ -6,3 +6,4 @@
 //! constants), [`controller`] (OSC_POSE and the gripper ramp), [`env`] (reset/step/observe).
 
 pub mod mujoco;
+pub mod render;

@@ -1,0 +1,703 @@
+//! Offscreen rendering: EGL's surfaceless platform + MuJoCo's OpenGL renderer.
+//!
+//! The same code path runs on a CPU-only machine (Mesa llvmpipe) and on a GPU machine: EGL is opened at
+//! run time (`libEGL.so.1`, libglvnd), a display is taken from `EGL_PLATFORM_SURFACELESS_MESA` (falling back
+//! to the first `EGL_EXT_platform_device` device), a desktop-GL compatibility context is made current without
+//! a surface, and MuJoCo draws into its own offscreen framebuffer. A [`Renderer`] is bound to the thread
+//! that created it (GL contexts are per thread), so it is neither `Send` nor `Sync`.
+//!
+//! Frames come back **upright** (row 0 = top of the image), unlike OpenGL's bottom-up rows.
+
+use std::ffi::{CStr, c_char, c_void};
+use std::marker::PhantomData;
+
+use crate::mujoco::{Data, MjError, Model, ObjType, ffi, guard};
+
+/// Errors from the renderer.
+#[derive(Debug, thiserror::Error)]
+pub enum RenderError {
+    /// EGL or OpenGL is missing or refused to give us a context.
+    #[error(
+        "offscreen OpenGL unavailable: {0}. Install EGL and Mesa's GL drivers with \
+         `apt-get install libegl1 libegl-mesa0 libgl1-mesa-dri libgl1` (on NVIDIA machines the driver's EGL \
+         vendor library)"
+    )]
+    Gl(String),
+    /// A camera name the model does not contain.
+    #[error("unknown camera '{name}' (the model has: {available})")]
+    UnknownCamera {
+        /// The requested name.
+        name: String,
+        /// Comma-separated camera names of the model.
+        available: String,
+    },
+    /// Width or height outside what the renderer was created for.
+    #[error("bad image size {width}x{height}: {reason}")]
+    BadSize {
+        /// Requested width.
+        width: usize,
+        /// Requested height.
+        height: usize,
+        /// Why it was refused.
+        reason: String,
+    },
+    /// MuJoCo raised an error while rendering.
+    #[error(transparent)]
+    Mujoco(#[from] MjError),
+}
+
+/// Result alias for this module.
+pub type Result<T, E = RenderError> = std::result::Result<T, E>;
+
+// --- EGL, loaded at run time ----------------------------------------------------------------------
+
+type EglDisplay = *mut c_void;
+type EglConfig = *mut c_void;
+type EglContext = *mut c_void;
+type EglInt = i32;
+
+const EGL_NONE: EglInt = 0x3038;
+const EGL_EXTENSIONS: EglInt = 0x3055;
+const EGL_VENDOR: EglInt = 0x3053;
+const EGL_PLATFORM_SURFACELESS_MESA: u32 = 0x31DD;
+const EGL_PLATFORM_DEVICE_EXT: u32 = 0x313F;
+const EGL_SURFACE_TYPE: EglInt = 0x3033;
+const EGL_PBUFFER_BIT: EglInt = 0x0001;
+const EGL_RENDERABLE_TYPE: EglInt = 0x3040;
+const EGL_OPENGL_BIT: EglInt = 0x0008;
+const EGL_RED_SIZE: EglInt = 0x3024;
+const EGL_GREEN_SIZE: EglInt = 0x3023;
+const EGL_BLUE_SIZE: EglInt = 0x3022;
+const EGL_ALPHA_SIZE: EglInt = 0x3021;
+const EGL_DEPTH_SIZE: EglInt = 0x3025;
+const EGL_STENCIL_SIZE: EglInt = 0x3026;
+const EGL_OPENGL_API: u32 = 0x30A2;
+const GL_VENDOR: u32 = 0x1F00;
+const GL_RENDERER: u32 = 0x1F01;
+const GL_VERSION: u32 = 0x1F02;
+
+type FnGetProcAddress = unsafe extern "C" fn(*const c_char) -> *mut c_void;
+type FnQueryString = unsafe extern "C" fn(EglDisplay, EglInt) -> *const c_char;
+type FnGetPlatformDisplay = unsafe extern "C" fn(u32, *mut c_void, *const EglInt) -> EglDisplay;
+type FnQueryDevices = unsafe extern "C" fn(EglInt, *mut *mut c_void, *mut EglInt) -> u32;
+type FnInitialize = unsafe extern "C" fn(EglDisplay, *mut EglInt, *mut EglInt) -> u32;
+type FnChooseConfig =
+    unsafe extern "C" fn(EglDisplay, *const EglInt, *mut EglConfig, EglInt, *mut EglInt) -> u32;
+type FnBindApi = unsafe extern "C" fn(u32) -> u32;
+type FnCreateContext =
+    unsafe extern "C" fn(EglDisplay, EglConfig, EglContext, *const EglInt) -> EglContext;
+type FnMakeCurrent = unsafe extern "C" fn(EglDisplay, *mut c_void, *mut c_void, EglContext) -> u32;
+type FnDestroyContext = unsafe extern "C" fn(EglDisplay, EglContext) -> u32;
+type FnTerminate = unsafe extern "C" fn(EglDisplay) -> u32;
+type FnGetError = unsafe extern "C" fn() -> EglInt;
+type FnGlGetString = unsafe extern "C" fn(u32) -> *const u8;
+
+/// A current EGL + desktop-GL context with no window (one per thread).
+struct GlContext {
+    _lib: libloading::Library,
+    display: EglDisplay,
+    context: EglContext,
+    make_current: FnMakeCurrent,
+    destroy_context: FnDestroyContext,
+    terminate: FnTerminate,
+    info: GlInfo,
+}
+
+/// Which OpenGL implementation renders (for `sim info` and logs).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct GlInfo {
+    /// `GL_VENDOR`.
+    pub vendor: String,
+    /// `GL_RENDERER` (e.g. "llvmpipe (LLVM 15.0.6, 256 bits)").
+    pub renderer: String,
+    /// `GL_VERSION`.
+    pub version: String,
+    /// The EGL platform used (`surfaceless` or `device`).
+    pub platform: String,
+}
+
+unsafe fn sym<T: Copy>(lib: &libloading::Library, name: &[u8]) -> Result<T> {
+    // SAFETY: the caller names a symbol whose C signature matches T.
+    unsafe { lib.get::<T>(name) }.map(|s| *s).map_err(|e| {
+        RenderError::Gl(format!(
+            "libEGL.so.1 lacks {}: {e}",
+            String::from_utf8_lossy(&name[..name.len() - 1])
+        ))
+    })
+}
+
+fn cstr(p: *const c_char) -> String {
+    if p.is_null() {
+        String::new()
+    } else {
+        // SAFETY: EGL/GL return NUL-terminated static strings.
+        unsafe { CStr::from_ptr(p) }.to_string_lossy().into_owned()
+    }
+}
+
+impl GlContext {
+    fn new() -> Result<GlContext> {
+        // SAFETY: loading the system's EGL dispatcher; symbols are resolved with their C signatures below.
+        let lib = unsafe { libloading::Library::new("libEGL.so.1") }
+            .map_err(|e| RenderError::Gl(format!("cannot open libEGL.so.1 ({e})")))?;
+        // SAFETY: each symbol is looked up with the signature of the EGL 1.5 specification.
+        unsafe {
+            let get_proc: FnGetProcAddress = sym(&lib, b"eglGetProcAddress\0")?;
+            let query_string: FnQueryString = sym(&lib, b"eglQueryString\0")?;
+            let initialize: FnInitialize = sym(&lib, b"eglInitialize\0")?;
+            let choose_config: FnChooseConfig = sym(&lib, b"eglChooseConfig\0")?;
+            let bind_api: FnBindApi = sym(&lib, b"eglBindAPI\0")?;
+            let create_context: FnCreateContext = sym(&lib, b"eglCreateContext\0")?;
+            let make_current: FnMakeCurrent = sym(&lib, b"eglMakeCurrent\0")?;
+            let destroy_context: FnDestroyContext = sym(&lib, b"eglDestroyContext\0")?;
+            let terminate: FnTerminate = sym(&lib, b"eglTerminate\0")?;
+            let get_error: FnGetError = sym(&lib, b"eglGetError\0")?;
+
+            let client_ext = cstr(query_string(std::ptr::null_mut(), EGL_EXTENSIONS));
+            let gpd = get_proc(c"eglGetPlatformDisplayEXT".as_ptr());
+            if gpd.is_null() {
+                return Err(RenderError::Gl("EGL has no eglGetPlatformDisplayEXT".into()));
+            }
+            let get_platform_display: FnGetPlatformDisplay = std::mem::transmute(gpd);
+
+            let mut attempts = Vec::new();
+            let mut chosen = None;
+            if client_ext.contains("EGL_MESA_platform_surfaceless") {
+                let d = get_platform_display(
+                    EGL_PLATFORM_SURFACELESS_MESA,
+                    std::ptr::null_mut(),
+                    std::ptr::null(),
+                );
+                let (mut maj, mut min) = (0, 0);
+                if !d.is_null() && initialize(d, &mut maj, &mut min) != 0 {
+                    chosen = Some((d, "surfaceless"));
+                } else {
+                    attempts.push(format!("surfaceless platform failed (EGL error 0x{:x})", get_error()));
+                }
+            } else {
+                attempts.push("no EGL_MESA_platform_surfaceless".to_string());
+            }
+            if chosen.is_none() && client_ext.contains("EGL_EXT_platform_device") {
+                let qd = get_proc(c"eglQueryDevicesEXT".as_ptr());
+                if !qd.is_null() {
+                    let query_devices: FnQueryDevices = std::mem::transmute(qd);
+                    let mut devices = [std::ptr::null_mut(); 16];
+                    let mut n = 0;
+                    if query_devices(16, devices.as_mut_ptr(), &mut n) != 0 {
+                        for dev in devices.iter().take(n.max(0) as usize) {
+                            let d = get_platform_display(EGL_PLATFORM_DEVICE_EXT, *dev, std::ptr::null());
+                            let (mut maj, mut min) = (0, 0);
+                            if !d.is_null() && initialize(d, &mut maj, &mut min) != 0 {
+                                chosen = Some((d, "device"));
+                                break;
+                            }
+                        }
+                    }
+                }
+                if chosen.is_none() {
+                    attempts.push("no usable EGL device".to_string());
+                }
+            }
+            let Some((display, platform)) = chosen else {
+                return Err(RenderError::Gl(attempts.join("; ")));
+            };
+
+            let attribs = [
+                EGL_SURFACE_TYPE,
+                EGL_PBUFFER_BIT,
+                EGL_RENDERABLE_TYPE,
+                EGL_OPENGL_BIT,
+                EGL_RED_SIZE,
+                8,
+                EGL_GREEN_SIZE,
+                8,
+                EGL_BLUE_SIZE,
+                8,
+                EGL_ALPHA_SIZE,
+                8,
+                EGL_DEPTH_SIZE,
+                24,
+                EGL_STENCIL_SIZE,
+                8,
+                EGL_NONE,
+            ];
+            let mut config: EglConfig = std::ptr::null_mut();
+            let mut n = 0;
+            if choose_config(display, attribs.as_ptr(), &mut config, 1, &mut n) == 0 || n < 1 {
+                terminate(display);
+                return Err(RenderError::Gl("no EGL config with desktop OpenGL".into()));
+            }
+            if bind_api(EGL_OPENGL_API) == 0 {
+                terminate(display);
+                return Err(RenderError::Gl("eglBindAPI(EGL_OPENGL_API) failed".into()));
+            }
+            // Default attributes: a compatibility-profile context, which MuJoCo 2.2.2 needs.
+            let context = create_context(display, config, std::ptr::null_mut(), [EGL_NONE].as_ptr());
+            if context.is_null() {
+                let e = get_error();
+                terminate(display);
+                return Err(RenderError::Gl(format!("eglCreateContext failed (0x{e:x})")));
+            }
+            if make_current(display, std::ptr::null_mut(), std::ptr::null_mut(), context) == 0 {
+                let e = get_error();
+                destroy_context(display, context);
+                terminate(display);
+                return Err(RenderError::Gl(format!(
+                    "eglMakeCurrent without a surface failed (0x{e:x})"
+                )));
+            }
+            let gs = get_proc(c"glGetString".as_ptr());
+            let info = if gs.is_null() {
+                GlInfo {
+                    vendor: cstr(query_string(display, EGL_VENDOR)),
+                    renderer: "unknown".into(),
+                    version: "unknown".into(),
+                    platform: platform.into(),
+                }
+            } else {
+                let get_string: FnGlGetString = std::mem::transmute(gs);
+                let s = |name| cstr(get_string(name) as *const c_char);
+                GlInfo {
+                    vendor: s(GL_VENDOR),
+                    renderer: s(GL_RENDERER),
+                    version: s(GL_VERSION),
+                    platform: platform.into(),
+                }
+            };
+            Ok(GlContext {
+                _lib: lib,
+                display,
+                context,
+                make_current,
+                destroy_context,
+                terminate,
+                info,
+            })
+        }
+    }
+
+    fn make_current(&self) {
+        // SAFETY: display and context are valid until drop.
+        unsafe {
+            (self.make_current)(self.display, std::ptr::null_mut(), std::ptr::null_mut(), self.context);
+        }
+    }
+}
+
+impl Drop for GlContext {
+    fn drop(&mut self) {
+        // SAFETY: release the context from this thread, then destroy it and the display connection.
+        unsafe {
+            (self.make_current)(
+                self.display,
+                std::ptr::null_mut(),
+                std::ptr::null_mut(),
+                std::ptr::null_mut(),
+            );
+            (self.destroy_context)(self.display, self.context);
+            (self.terminate)(self.display);
+        }
+    }
+}
+
+// --- MuJoCo renderer -------------------------------------------------------------------------------
+
+/// Rendering quality knobs. The defaults are the fast ones (all off), as used for datasets.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+pub struct RenderQuality {
+    /// Shadow maps from lights that cast shadows.
+    pub shadows: bool,
+    /// Multisample anti-aliasing samples (0 = off).
+    pub msaa_samples: u32,
+    /// Reflections on reflective materials.
+    pub reflections: bool,
+}
+
+impl Default for RenderQuality {
+    fn default() -> Self {
+        RenderQuality {
+            shadows: false,
+            msaa_samples: 0,
+            reflections: false,
+        }
+    }
+}
+
+impl RenderQuality {
+    /// MuJoCo's own defaults (shadows, 4× MSAA, reflections): prettier, ~20× slower on a CPU.
+    pub fn high() -> Self {
+        RenderQuality {
+            shadows: true,
+            msaa_samples: 4,
+            reflections: true,
+        }
+    }
+}
+
+/// Which images to produce for one camera.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct Channels {
+    /// RGB, u8.
+    pub rgb: bool,
+    /// Depth in metres, f32.
+    pub depth: bool,
+    /// Per-pixel geom id (−1 = background).
+    pub segmentation: bool,
+}
+
+impl Channels {
+    /// RGB only.
+    pub const RGB: Channels = Channels {
+        rgb: true,
+        depth: false,
+        segmentation: false,
+    };
+    /// Everything.
+    pub const ALL: Channels = Channels {
+        rgb: true,
+        depth: true,
+        segmentation: true,
+    };
+}
+
+/// One camera's images, upright (row 0 = top), row-major.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct Frame {
+    /// Width in pixels.
+    pub width: usize,
+    /// Height in pixels.
+    pub height: usize,
+    /// RGB bytes `[H, W, 3]`, if requested.
+    pub rgb: Option<Vec<u8>>,
+    /// Depth in metres `[H, W]` (distance along the camera axis), if requested.
+    pub depth: Option<Vec<f32>>,
+    /// Geom id per pixel `[H, W]`, −1 for background or non-geom elements, if requested.
+    pub segmentation: Option<Vec<i32>>,
+}
+
+/// Renders named cameras of one model into CPU buffers.
+pub struct Renderer {
+    gl: GlContext,
+    scene: Box<ffi::mjvScene>,
+    context: Box<ffi::mjrContext>,
+    option: ffi::mjvOption,
+    perturb: ffi::mjvPerturb,
+    quality: RenderQuality,
+    max_width: usize,
+    max_height: usize,
+    camera_names: Vec<String>,
+    rgb_buf: Vec<u8>,
+    depth_buf: Vec<f32>,
+    znear: f64,
+    zfar: f64,
+    _not_send: PhantomData<*mut ()>,
+}
+
+impl Renderer {
+    /// Creates a renderer for `model` able to render images up to `max_width × max_height`.
+    ///
+    /// Geom group 0 (collision-only geoms) is hidden, as in LIBERO.
+    pub fn new(model: &Model, max_width: usize, max_height: usize, quality: RenderQuality) -> Result<Renderer> {
+        if max_width == 0 || max_height == 0 || max_width > 8192 || max_height > 8192 {
+            return Err(RenderError::BadSize {
+                width: max_width,
+                height: max_height,
+                reason: "sides must be between 1 and 8192 pixels".into(),
+            });
+        }
+        crate::mujoco::init()?;
+        let gl = GlContext::new()?;
+        // A shallow copy of the model struct (arrays shared, read-only) with our offscreen size and MSAA:
+        // mjr_makeContext only reads it, and the shared model stays untouched.
+        // SAFETY: mjModel is plain data; the copy is only read and is never freed.
+        let mut view: ffi::mjModel = unsafe { std::ptr::read(model.raw()) };
+        view.vis.global.offwidth = max_width as i32;
+        view.vis.global.offheight = max_height as i32;
+        view.vis.quality.offsamples = quality.msaa_samples as i32;
+
+        let mut scene = Box::<ffi::mjvScene>::new_uninit();
+        let mut context = Box::<ffi::mjrContext>::new_uninit();
+        // SAFETY: default* initialise the structs; make* allocate their buffers; errors unwind into guard.
+        let (scene, context) = unsafe {
+            ffi::mjv_defaultScene(scene.as_mut_ptr());
+            ffi::mjr_defaultContext(context.as_mut_ptr());
+            let mut scene = scene.assume_init();
+            let mut context = context.assume_init();
+            let maxgeom = (2 * model.ngeom() + 200) as i32;
+            let scn_ptr: *mut ffi::mjvScene = &mut *scene;
+            guard(|| ffi::mjv_makeScene(model.ptr(), scn_ptr, maxgeom))?;
+            let con_ptr: *mut ffi::mjrContext = &mut *context;
+            let vptr: *const ffi::mjModel = &view;
+            let made = guard(|| {
+                ffi::mjr_makeContext(vptr, con_ptr, ffi::mjFONTSCALE_100 as i32);
+                ffi::mjr_setBuffer(ffi::mjFB_OFFSCREEN as i32, con_ptr);
+            });
+            if let Err(e) = made {
+                ffi::mjv_freeScene(scn_ptr);
+                return Err(RenderError::Gl(format!("MuJoCo could not set up OpenGL: {e}")));
+            }
+            if (context.offWidth as usize) < max_width || (context.offHeight as usize) < max_height {
+                ffi::mjr_freeContext(con_ptr);
+                ffi::mjv_freeScene(scn_ptr);
+                return Err(RenderError::BadSize {
+                    width: max_width,
+                    height: max_height,
+                    reason: "larger than the GL driver's offscreen buffer".into(),
+                });
+            }
+            (scene, context)
+        };
+        let mut option = std::mem::MaybeUninit::<ffi::mjvOption>::uninit();
+        let mut perturb = std::mem::MaybeUninit::<ffi::mjvPerturb>::uninit();
+        // SAFETY: default* fully initialise the structs.
+        let (mut option, perturb) = unsafe {
+            ffi::mjv_defaultOption(option.as_mut_ptr());
+            ffi::mjv_defaultPerturb(perturb.as_mut_ptr());
+            (option.assume_init(), perturb.assume_init())
+        };
+        option.geomgroup[0] = 0;
+        let extent = model.extent();
+        let vis = &model.raw().vis.map;
+        let mut r = Renderer {
+            gl,
+            scene,
+            context,
+            option,
+            perturb,
+            quality,
+            max_width,
+            max_height,
+            camera_names: model.names(ObjType::Camera),
+            rgb_buf: vec![0; 3 * max_width * max_height],
+            depth_buf: vec![0.0; max_width * max_height],
+            znear: vis.znear as f64 * extent,
+            zfar: vis.zfar as f64 * extent,
+            _not_send: PhantomData,
+        };
+        r.apply_quality();
+        Ok(r)
+    }
+
+    fn apply_quality(&mut self) {
+        let flags = &mut self.scene.flags;
+        flags[ffi::mjRND_SHADOW as usize] = self.quality.shadows as u8;
+        flags[ffi::mjRND_REFLECTION as usize] = self.quality.reflections as u8;
+        flags[ffi::mjRND_SKYBOX as usize] = 0;
+        flags[ffi::mjRND_SEGMENT as usize] = 0;
+        flags[ffi::mjRND_IDCOLOR as usize] = 0;
+    }
+
+    /// The OpenGL implementation in use.
+    pub fn gl_info(&self) -> &GlInfo {
+        &self.gl.info
+    }
+
+    /// The quality settings in use.
+    pub fn quality(&self) -> RenderQuality {
+        self.quality
+    }
+
+    /// Largest image this renderer can produce.
+    pub fn max_size(&self) -> (usize, usize) {
+        (self.max_width, self.max_height)
+    }
+
+    /// Id of the named camera, or a clear error listing the model's cameras.
+    pub fn camera_id(&self, name: &str) -> Result<usize> {
+        self.camera_names
+            .iter()
+            .position(|n| n == name)
+            .ok_or_else(|| RenderError::UnknownCamera {
+                name: name.to_string(),
+                available: self
+                    .camera_names
+                    .iter()
+                    .filter(|n| !n.is_empty())
+                    .cloned()
+                    .collect::<Vec<_>>()
+                    .join(", "),
+            })
+    }
+
+    /// Renders camera `camera` (an id from [`Renderer::camera_id`]) at `width × height`.
+    ///
+    /// `data` must be up to date (after `forward` or a step). Output rows are upright.
+    pub fn render(
+        &mut self,
+        data: &mut Data,
+        camera: usize,
+        width: usize,
+        height: usize,
+        channels: Channels,
+    ) -> Result<Frame> {
+        if width == 0 || height == 0 || width > self.max_width || height > self.max_height {
+            return Err(RenderError::BadSize {
+                width,
+                height,
+                reason: format!(
+                    "this renderer was made for at most {}x{}",
+                    self.max_width, self.max_height
+                ),
+            });
+        }
+        if camera >= self.camera_names.len() {
+            return Err(RenderError::UnknownCamera {
+                name: format!("#{camera}"),
+                available: self.camera_names.join(", "),
+            });
+        }
+        self.gl.make_current();
+        let mut cam = std::mem::MaybeUninit::<ffi::mjvCamera>::uninit();
+        // SAFETY: mjv_defaultCamera initialises the struct.
+        let mut cam = unsafe {
+            ffi::mjv_defaultCamera(cam.as_mut_ptr());
+            cam.assume_init()
+        };
+        cam.type_ = ffi::mjCAMERA_FIXED as i32;
+        cam.fixedcamid = camera as i32;
+        let viewport = ffi::mjrRect {
+            left: 0,
+            bottom: 0,
+            width: width as i32,
+            height: height as i32,
+        };
+        let m = data.model().ptr();
+        let d = data.ptr();
+        let scn: *mut ffi::mjvScene = &mut *self.scene;
+        let con: *const ffi::mjrContext = &*self.context;
+        let (opt, pert): (*const ffi::mjvOption, *const ffi::mjvPerturb) = (&self.option, &self.perturb);
+        let n = width * height;
+        // SAFETY: all pointers are valid; buffers hold max_width*max_height entries.
+        unsafe {
+            guard(|| ffi::mjv_updateScene(m, d, opt, pert, &mut cam, ffi::mjCAT_ALL as i32, scn))?;
+        }
+        let mut frame = Frame {
+            width,
+            height,
+            ..Frame::default()
+        };
+        if channels.rgb || channels.depth {
+            let depth_ptr = if channels.depth {
+                self.depth_buf.as_mut_ptr()
+            } else {
+                std::ptr::null_mut()
+            };
+            let rgb_ptr = if channels.rgb {
+                self.rgb_buf.as_mut_ptr()
+            } else {
+                std::ptr::null_mut()
+            };
+            // SAFETY: as above.
+            unsafe {
+                guard(|| {
+                    ffi::mjr_render(viewport, scn, con);
+                    ffi::mjr_readPixels(rgb_ptr, depth_ptr, viewport, con);
+                })?;
+            }
+            if channels.rgb {
+                frame.rgb = Some(flip_rows(&self.rgb_buf[..3 * n], width, height, 3));
+            }
+            if channels.depth {
+                let (near, far) = (self.znear, self.zfar);
+                let lin: Vec<f32> = self.depth_buf[..n]
+                    .iter()
+                    .map(|&z| (near / (1.0 - z as f64 * (1.0 - near / far))) as f32)
+                    .collect();
+                frame.depth = Some(flip_rows(&lin, width, height, 1));
+            }
+        }
+        if channels.segmentation {
+            self.scene.flags[ffi::mjRND_SEGMENT as usize] = 1;
+            self.scene.flags[ffi::mjRND_IDCOLOR as usize] = 1;
+            // SAFETY: as above.
+            let r = unsafe {
+                guard(|| {
+                    ffi::mjr_render(viewport, scn, con);
+                    ffi::mjr_readPixels(self.rgb_buf.as_mut_ptr(), std::ptr::null_mut(), viewport, con);
+                })
+            };
+            self.scene.flags[ffi::mjRND_SEGMENT as usize] = 0;
+            self.scene.flags[ffi::mjRND_IDCOLOR as usize] = 0;
+            r?;
+            let ngeom = self.scene.ngeom.max(0) as usize;
+            // SAFETY: the scene holds `ngeom` valid entries after mjv_updateScene.
+            let geoms = unsafe { std::slice::from_raw_parts(self.scene.geoms, ngeom) };
+            let ids: Vec<i32> = self.rgb_buf[..3 * n]
+                .chunks_exact(3)
+                .map(|p| {
+                    let seg = p[0] as i64 + 256 * p[1] as i64 + 65536 * p[2] as i64 - 1;
+                    if seg < 0 || seg as usize >= ngeom {
+                        return -1;
+                    }
+                    let g = &geoms[seg as usize];
+                    if g.objtype == ffi::mjOBJ_GEOM as i32 { g.objid } else { -1 }
+                })
+                .collect();
+            frame.segmentation = Some(flip_rows(&ids, width, height, 1));
+        }
+        Ok(frame)
+    }
+
+    /// Convenience: render camera `name` at `size × size`.
+    pub fn render_named(&mut self, data: &mut Data, name: &str, size: usize, channels: Channels) -> Result<Frame> {
+        let id = self.camera_id(name)?;
+        self.render(data, id, size, size, channels)
+    }
+}
+
+impl Drop for Renderer {
+    fn drop(&mut self) {
+        self.gl.make_current();
+        // SAFETY: both were allocated in `new`; freed once, with the context current.
+        unsafe {
+            ffi::mjr_freeContext(&mut *self.context);
+            ffi::mjv_freeScene(&mut *self.scene);
+        }
+    }
+}
+
+/// Reverses the row order of a `[height, width, channels]` buffer (OpenGL rows are bottom-up).
+pub fn flip_rows<T: Copy>(buf: &[T], width: usize, height: usize, channels: usize) -> Vec<T> {
+    let row = width * channels;
+    assert_eq!(buf.len(), row * height, "buffer is not [height, width, channels]");
+    let mut out = Vec::with_capacity(buf.len());
+    for r in (0..height).rev() {
+        out.extend_from_slice(&buf[r * row..(r + 1) * row]);
+    }
+    out
+}
+
+/// Maps a geom-id segmentation image to body ids (−1 stays −1).
+pub fn geoms_to_bodies(model: &Model, seg: &[i32]) -> Vec<i32> {
+    seg.iter()
+        .map(|&g| if g < 0 { -1 } else { model.geom_body(g as usize) as i32 })
+        .collect()
+}
+
+/// Writes an RGB frame as PNG (the path is written atomically: temporary name, then rename).
+pub fn save_png(frame: &Frame, path: &std::path::Path) -> std::io::Result<()> {
+    let rgb = frame
+        .rgb
+        .as_ref()
+        .ok_or_else(|| std::io::Error::other("frame has no RGB image"))?;
+    let img = image::RgbImage::from_raw(frame.width as u32, frame.height as u32, rgb.clone())
+        .ok_or_else(|| std::io::Error::other("RGB buffer does not match the frame size"))?;
+    let tmp = path.with_extension("png.tmp");
+    img.save_with_format(&tmp, image::ImageFormat::Png)
+        .map_err(std::io::Error::other)?;
+    std::fs::rename(&tmp, path).inspect_err(|_| {
+        let _ = std::fs::remove_file(&tmp);
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn flip_rows_reverses_rows() {
+        let b = [1, 2, 3, 4, 5, 6];
+        assert_eq!(flip_rows(&b, 2, 3, 1), vec![5, 6, 3, 4, 1, 2]);
+        assert_eq!(flip_rows(&b, 1, 2, 3), vec![4, 5, 6, 1, 2, 3]);
+    }
+}
