@@ -7,3 +7,8 @@
 
 pub mod mujoco;
 pub mod render;
+pub mod robot;
+pub mod controller;
+pub mod env;
+
+pub use env::{Env, EnvConfig, EnvError, Observation};

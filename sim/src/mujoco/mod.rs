@@ -332,12 +332,6 @@ impl Model {
         unsafe { self.raw.as_ref() }
     }
 
-    /// Raw mutable access (render settings before context creation).
-    pub(crate) fn raw_mut(&mut self) -> &mut ffi::mjModel {
-        // SAFETY: valid and uniquely borrowed.
-        unsafe { self.raw.as_mut() }
-    }
-
     pub(crate) fn ptr(&self) -> *const ffi::mjModel {
         self.raw.as_ptr()
     }

@@ -1,0 +1,391 @@
+//! A minimal LIBERO-style environment: the tabletop arena, the Panda, and one free box.
+//!
+//! `reset(seed)` places the box from a ChaCha stream seeded by `seed` and puts the arm at LIBERO's nominal
+//! configuration; `step(action)` runs LIBERO's control loop (20 Hz over 25 physics substeps of 2 ms, OSC_POSE
+//! goal on the first substep, gripper ramp on every substep) and returns an [`Observation`]. Same seed and
+//! same actions give bit-identical observations, images included.
+
+use std::fmt::Write;
+use std::sync::Arc;
+
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+
+use crate::controller::{GripperRamp, OscPose, quat_to_axis_angle};
+use crate::mujoco::{Data, MjError, Model, ObjType};
+use crate::render::{Channels, RenderError, RenderQuality, Renderer};
+use crate::robot::{BASE_POS, ENV_CONAFFINITY, ENV_CONTYPE, INIT_FINGERS, INIT_QPOS, PandaIds, panda_xml};
+
+/// Physics substeps per control step (0.05 s / 0.002 s).
+pub const SUBSTEPS: usize = 25;
+/// Control frequency in Hz.
+pub const CONTROL_HZ: f64 = 20.0;
+/// Name of the third-person camera.
+pub const AGENTVIEW: &str = "agentview";
+/// Name of the wrist camera.
+pub const EYE_IN_HAND: &str = "robot0_eye_in_hand";
+
+/// Errors from the environment.
+#[derive(Debug, thiserror::Error)]
+pub enum EnvError {
+    /// MuJoCo failed.
+    #[error(transparent)]
+    Mujoco(#[from] MjError),
+    /// Rendering failed.
+    #[error(transparent)]
+    Render(#[from] RenderError),
+    /// The action is not 7 finite numbers.
+    #[error("invalid action: {0}")]
+    Action(String),
+    /// The configuration is invalid.
+    #[error("invalid environment config: {0}")]
+    Config(String),
+}
+
+/// Environment settings.
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct EnvConfig {
+    /// Side of the square camera images in pixels (LIBERO: 128).
+    pub image_size: usize,
+    /// Render camera images at all (off: state-only, much faster).
+    pub render: bool,
+    /// Also return depth images (metres).
+    pub depth: bool,
+    /// Also return instance segmentation.
+    pub segmentation: bool,
+    /// Rendering quality (fast defaults).
+    pub quality: RenderQuality,
+    /// Standard deviation of Gaussian noise on the arm joints at reset (rad); LIBERO's eval uses 0.
+    pub init_noise: f64,
+}
+
+impl Default for EnvConfig {
+    fn default() -> Self {
+        EnvConfig {
+            image_size: 128,
+            render: true,
+            depth: false,
+            segmentation: false,
+            quality: RenderQuality::default(),
+            init_noise: 0.0,
+        }
+    }
+}
+
+/// What the policy sees after `reset` or `step`. Images are upright (row 0 = top), `[H, W, 3]` row-major.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Observation {
+    /// Control steps taken since reset.
+    pub step: usize,
+    /// Image side in pixels (0 when rendering is off).
+    pub image_size: usize,
+    /// Third-person RGB `[H, W, 3]` (empty when rendering is off).
+    pub agentview_rgb: Vec<u8>,
+    /// Wrist RGB `[H, W, 3]` (empty when rendering is off).
+    pub eye_in_hand_rgb: Vec<u8>,
+    /// Third-person depth in metres `[H, W]`, if enabled.
+    pub agentview_depth: Option<Vec<f32>>,
+    /// Wrist depth in metres `[H, W]`, if enabled.
+    pub eye_in_hand_depth: Option<Vec<f32>>,
+    /// Third-person instance ids `[H, W]` (top-level body id of the visible geom, −1 background), if enabled.
+    pub agentview_segmentation: Option<Vec<i32>>,
+    /// Wrist instance ids `[H, W]`, if enabled.
+    pub eye_in_hand_segmentation: Option<Vec<i32>>,
+    /// Proprio: eef position (3) + eef axis-angle (3) + finger qpos (2).
+    pub state: [f32; 8],
+    /// Arm joint positions.
+    pub joint_state: [f32; 7],
+    /// End-effector (grip site) position, full precision.
+    pub eef_pos: [f64; 3],
+    /// End-effector orientation (`robot0_right_hand` body), quaternion wxyz.
+    pub eef_quat: [f64; 4],
+}
+
+/// Builds the MJCF of the minimal scene: floor, LIBERO's tabletop table, cameras, the Panda, one box.
+pub fn minimal_scene_xml() -> String {
+    let panda = panda_xml(BASE_POS);
+    let mut x = String::new();
+    let _ = write!(
+        x,
+        r#"<mujoco model="libero_tabletop_box">
+<compiler angle="radian" autolimits="true"/>
+<option timestep="0.002" impratio="20" cone="elliptic" density="1.2" viscosity="2e-5"/>
+<visual><global offwidth="256" offheight="256"/><quality offsamples="0"/><headlight ambient="0.3 0.3 0.3" diffuse="0.4 0.4 0.4" specular="0.1 0.1 0.1"/></visual>
+<asset>
+<texture name="floor_tex" type="2d" builtin="checker" rgb1="0.62 0.62 0.62" rgb2="0.56 0.56 0.56" width="64" height="64"/>
+<material name="floor_mat" texture="floor_tex" texrepeat="12 12" reflectance="0"/>
+<material name="table_mat" rgba="0.62 0.45 0.30 1" reflectance="0"/>
+<material name="wall_mat" rgba="0.82 0.82 0.80 1" reflectance="0"/>
+</asset>
+<default>
+{defaults}<default class="env"><geom contype="{ct}" conaffinity="{ca}" group="1"/></default>
+</default>
+<worldbody>
+<light name="light0" pos="1 1 4" dir="-0.24 -0.24 -0.94" diffuse="0.8 0.8 0.8" specular="0.3 0.3 0.3" castshadow="false"/>
+<light name="light1" pos="-3 -3 4" dir="0.51 0.51 -0.69" diffuse="0.8 0.8 0.8" specular="0.3 0.3 0.3" castshadow="false"/>
+<geom name="floor" class="env" type="plane" size="3 3 0.125" material="floor_mat"/>
+<geom name="wall_back" type="box" pos="-1.6 0 1.5" size="0.01 3 1.5" material="wall_mat" contype="0" conaffinity="0" group="1"/>
+<geom name="wall_left" type="box" pos="0 3 1.5" size="3 0.01 1.5" material="wall_mat" contype="0" conaffinity="0" group="1"/>
+<geom name="wall_right" type="box" pos="0 -3 1.5" size="3 0.01 1.5" material="wall_mat" contype="0" conaffinity="0" group="1"/>
+<body name="table" pos="0 0 0.875">
+<geom name="table_collision" class="env" type="box" size="0.5 0.6 0.025" friction="0.6 0.005 0.0001" material="table_mat"/>
+<geom name="table_leg1" type="cylinder" fromto="0.4 0.5 -0.025 0.4 0.5 -0.875" size="0.025" contype="0" conaffinity="0" group="1" rgba="0.3 0.3 0.3 1"/>
+<geom name="table_leg2" type="cylinder" fromto="-0.4 0.5 -0.025 -0.4 0.5 -0.875" size="0.025" contype="0" conaffinity="0" group="1" rgba="0.3 0.3 0.3 1"/>
+<geom name="table_leg3" type="cylinder" fromto="0.4 -0.5 -0.025 0.4 -0.5 -0.875" size="0.025" contype="0" conaffinity="0" group="1" rgba="0.3 0.3 0.3 1"/>
+<geom name="table_leg4" type="cylinder" fromto="-0.4 -0.5 -0.025 -0.4 -0.5 -0.875" size="0.025" contype="0" conaffinity="0" group="1" rgba="0.3 0.3 0.3 1"/>
+<site name="table_top" pos="0 0 0.025" size="0.001" rgba="0 0 0 0"/>
+</body>
+<camera name="agentview" pos="0.6586131746834771 0 1.6103500240372423" quat="0.6380177736282349 0.3048497438430786 0.30484986305236816 0.6380177736282349" fovy="45"/>
+<camera name="frontview" pos="1.0 0 1.48" quat="0.56 0.43 0.43 0.56" fovy="45"/>
+{body}<body name="cube" pos="0 0 0.92">
+<freejoint name="cube_joint"/>
+<geom name="cube_g" class="env" type="box" size="0.02 0.02 0.02" mass="0.1" friction="1 0.005 0.0001" rgba="0.85 0.15 0.12 1"/>
+</body>
+</worldbody>
+<actuator>
+{actuators}</actuator>
+</mujoco>
+"#,
+        defaults = panda.defaults,
+        body = panda.body,
+        actuators = panda.actuators,
+        ct = ENV_CONTYPE,
+        ca = ENV_CONAFFINITY,
+    );
+    x
+}
+
+/// The minimal environment.
+pub struct Env {
+    model: Arc<Model>,
+    data: Data,
+    renderer: Option<Renderer>,
+    ids: PandaIds,
+    osc: OscPose,
+    gripper: GripperRamp,
+    cfg: EnvConfig,
+    steps: usize,
+    cube_qpos: usize,
+    cams: [usize; 2],
+}
+
+impl Env {
+    /// Builds the scene, the renderer (if enabled) and the controller. Call [`Env::reset`] before stepping.
+    pub fn new(cfg: EnvConfig) -> Result<Env, EnvError> {
+        if cfg.render && (cfg.image_size == 0 || cfg.image_size > 4096) {
+            return Err(EnvError::Config(format!(
+                "image_size must be 1..=4096, got {}",
+                cfg.image_size
+            )));
+        }
+        if !(cfg.init_noise >= 0.0 && cfg.init_noise.is_finite()) {
+            return Err(EnvError::Config(format!(
+                "init_noise must be a finite non-negative number, got {}",
+                cfg.init_noise
+            )));
+        }
+        let model = Arc::new(Model::from_xml_str(&minimal_scene_xml())?);
+        let ids = PandaIds::find(&model)?;
+        let cube_joint = model.require(ObjType::Joint, "cube_joint")?;
+        let cube_qpos = model.joint_qpos_adr(cube_joint);
+        let mut data = Data::new(model.clone())?;
+        data.forward()?;
+        let renderer = if cfg.render {
+            Some(Renderer::new(&model, cfg.image_size, cfg.image_size, cfg.quality)?)
+        } else {
+            None
+        };
+        let cams = [
+            model.require(ObjType::Camera, AGENTVIEW)?,
+            model.require(ObjType::Camera, EYE_IN_HAND)?,
+        ];
+        let osc = OscPose::new(ids.clone(), &data);
+        Ok(Env {
+            model,
+            data,
+            renderer,
+            ids,
+            osc,
+            gripper: GripperRamp::default(),
+            cfg,
+            steps: 0,
+            cube_qpos,
+            cams,
+        })
+    }
+
+    /// The compiled model.
+    pub fn model(&self) -> &Arc<Model> {
+        &self.model
+    }
+
+    /// The simulation state (read-only).
+    pub fn data(&self) -> &Data {
+        &self.data
+    }
+
+    /// The Panda's indices.
+    pub fn robot(&self) -> &PandaIds {
+        &self.ids
+    }
+
+    /// The configuration.
+    pub fn config(&self) -> &EnvConfig {
+        &self.cfg
+    }
+
+    /// The renderer, if rendering is on.
+    pub fn renderer_mut(&mut self) -> Option<(&mut Renderer, &mut Data)> {
+        self.renderer.as_mut().map(|r| (r, &mut self.data))
+    }
+
+    /// Resets to LIBERO's initial arm configuration with the box placed from `seed`, and observes.
+    pub fn reset(&mut self, seed: u64) -> Result<Observation, EnvError> {
+        let mut rng = ChaCha8Rng::seed_from_u64(seed);
+        self.data.reset();
+        let noise = self.cfg.init_noise;
+        {
+            let qpos = self.data.qpos_mut();
+            for i in 0..7 {
+                let n = if noise > 0.0 { gaussian(&mut rng) * noise } else { 0.0 };
+                qpos[self.ids.arm_qpos[i]] = INIT_QPOS[i] + n;
+            }
+            qpos[self.ids.finger_qpos[0]] = INIT_FINGERS[0];
+            qpos[self.ids.finger_qpos[1]] = INIT_FINGERS[1];
+            let x = rng.random_range(-0.10..0.10);
+            let y = rng.random_range(-0.15..0.15);
+            let yaw: f64 = rng.random_range(0.0..std::f64::consts::TAU);
+            let c = self.cube_qpos;
+            qpos[c..c + 7].copy_from_slice(&[x, y, 0.92, (yaw / 2.0).cos(), 0.0, 0.0, (yaw / 2.0).sin()]);
+        }
+        self.data.qvel_mut().fill(0.0);
+        self.data.ctrl_mut().fill(0.0);
+        self.data.forward()?;
+        // robosuite re-creates the controller at reset: goal = current pose, posture = current arm qpos.
+        self.osc = OscPose::new(self.ids.clone(), &self.data);
+        self.gripper = GripperRamp::default();
+        self.steps = 0;
+        self.observe()
+    }
+
+    /// Applies one 7-D action `[dx, dy, dz, dax, day, daz, gripper]` in [−1, 1] for one control step.
+    pub fn step(&mut self, action: &[f32]) -> Result<Observation, EnvError> {
+        self.step_physics(action)?;
+        self.observe()
+    }
+
+    /// Runs the control loop for one action without rendering or observing.
+    pub fn step_physics(&mut self, action: &[f32]) -> Result<(), EnvError> {
+        if action.len() != 7 {
+            return Err(EnvError::Action(format!("expected 7 values, got {}", action.len())));
+        }
+        if let Some(i) = action.iter().position(|a| !a.is_finite()) {
+            return Err(EnvError::Action(format!("value {i} is {}", action[i])));
+        }
+        let a: Vec<f64> = action.iter().map(|&v| v as f64).collect();
+        // Invariant: positions and velocities are computed (forward at reset, step1 after each substep).
+        for sub in 0..SUBSTEPS {
+            if sub == 0 {
+                self.osc.set_goal(&self.data, [a[0], a[1], a[2], a[3], a[4], a[5]]);
+            }
+            let tau = self.osc.torques(&mut self.data);
+            let fingers = self.gripper.substep(a[6]);
+            let ids = &self.ids;
+            let ctrl = self.data.ctrl_mut();
+            for i in 0..7 {
+                ctrl[ids.arm_act[i]] = tau[i];
+            }
+            ctrl[ids.finger_act[0]] = fingers[0];
+            ctrl[ids.finger_act[1]] = fingers[1];
+            self.data.step2()?;
+            self.data.step1()?;
+        }
+        self.steps += 1;
+        Ok(())
+    }
+
+    /// Observes the current state (renders the cameras if enabled).
+    pub fn observe(&mut self) -> Result<Observation, EnvError> {
+        let eef_pos = self.data.site_pos(self.ids.grip_site);
+        let eef_quat = self.data.body_quat(self.ids.hand_body);
+        let aa = quat_to_axis_angle(eef_quat);
+        let qpos = self.data.qpos();
+        let f = [qpos[self.ids.finger_qpos[0]], qpos[self.ids.finger_qpos[1]]];
+        let state = [
+            eef_pos[0] as f32,
+            eef_pos[1] as f32,
+            eef_pos[2] as f32,
+            aa[0] as f32,
+            aa[1] as f32,
+            aa[2] as f32,
+            f[0] as f32,
+            f[1] as f32,
+        ];
+        let mut joint_state = [0f32; 7];
+        for i in 0..7 {
+            joint_state[i] = qpos[self.ids.arm_qpos[i]] as f32;
+        }
+        let mut obs = Observation {
+            step: self.steps,
+            image_size: 0,
+            agentview_rgb: Vec::new(),
+            eye_in_hand_rgb: Vec::new(),
+            agentview_depth: None,
+            eye_in_hand_depth: None,
+            agentview_segmentation: None,
+            eye_in_hand_segmentation: None,
+            state,
+            joint_state,
+            eef_pos,
+            eef_quat,
+        };
+        if let Some(r) = self.renderer.as_mut() {
+            let s = self.cfg.image_size;
+            let ch = Channels {
+                rgb: true,
+                depth: self.cfg.depth,
+                segmentation: self.cfg.segmentation,
+            };
+            let mut frames = Vec::with_capacity(2);
+            for &cam in &self.cams {
+                frames.push(r.render(&mut self.data, cam, s, s, ch)?);
+            }
+            let model = &self.model;
+            let to_instances = |seg: Vec<i32>| -> Vec<i32> {
+                seg.into_iter()
+                    .map(|g| {
+                        if g < 0 {
+                            -1
+                        } else {
+                            model.body_root(model.geom_body(g as usize)) as i32
+                        }
+                    })
+                    .collect()
+            };
+            let eye = frames.pop().expect("two frames");
+            let agent = frames.pop().expect("two frames");
+            obs.image_size = s;
+            obs.agentview_rgb = agent.rgb.unwrap_or_default();
+            obs.eye_in_hand_rgb = eye.rgb.unwrap_or_default();
+            obs.agentview_depth = agent.depth;
+            obs.eye_in_hand_depth = eye.depth;
+            obs.agentview_segmentation = agent.segmentation.map(to_instances);
+            obs.eye_in_hand_segmentation = eye.segmentation.map(to_instances);
+        }
+        Ok(obs)
+    }
+
+    /// World position of the box.
+    pub fn cube_pos(&self) -> [f64; 3] {
+        let q = &self.data.qpos()[self.cube_qpos..self.cube_qpos + 3];
+        [q[0], q[1], q[2]]
+    }
+}
+
+/// Standard normal sample (Box–Muller) from the episode's ChaCha stream.
+fn gaussian(rng: &mut ChaCha8Rng) -> f64 {
+    let u1: f64 = rng.random_range(f64::MIN_POSITIVE..1.0);
+    let u2: f64 = rng.random();
+    (-2.0 * u1.ln()).sqrt() * (std::f64::consts::TAU * u2).cos()
+}
