@@ -111,7 +111,7 @@ pub fn minimal_scene_xml() -> String {
         r#"<mujoco model="libero_tabletop_box">
 <compiler angle="radian" autolimits="true"/>
 <option timestep="0.002" impratio="20" cone="elliptic" density="1.2" viscosity="2e-5"/>
-<visual><global offwidth="256" offheight="256"/><quality offsamples="0"/><headlight ambient="0.3 0.3 0.3" diffuse="0.4 0.4 0.4" specular="0.1 0.1 0.1"/></visual>
+<visual><global offwidth="256" offheight="256"/><quality offsamples="0" numslices="16" numstacks="8" numquads="1"/><headlight ambient="0.25 0.25 0.25" diffuse="0.3 0.3 0.3" specular="0.1 0.1 0.1"/></visual>
 <asset>
 <texture name="floor_tex" type="2d" builtin="checker" rgb1="0.62 0.62 0.62" rgb2="0.56 0.56 0.56" width="64" height="64"/>
 <material name="floor_mat" texture="floor_tex" texrepeat="12 12" reflectance="0"/>
@@ -122,8 +122,8 @@ pub fn minimal_scene_xml() -> String {
 {defaults}<default class="env"><geom contype="{ct}" conaffinity="{ca}" group="1"/></default>
 </default>
 <worldbody>
-<light name="light0" pos="1 1 4" dir="-0.24 -0.24 -0.94" diffuse="0.8 0.8 0.8" specular="0.3 0.3 0.3" castshadow="false"/>
-<light name="light1" pos="-3 -3 4" dir="0.51 0.51 -0.69" diffuse="0.8 0.8 0.8" specular="0.3 0.3 0.3" castshadow="false"/>
+<light name="light0" pos="1 1 4" dir="-0.24 -0.24 -0.94" diffuse="0.55 0.55 0.55" specular="0.2 0.2 0.2" castshadow="false"/>
+<light name="light1" pos="-3 -3 4" dir="0.51 0.51 -0.69" diffuse="0.55 0.55 0.55" specular="0.2 0.2 0.2" castshadow="false"/>
 <geom name="floor" class="env" type="plane" size="3 3 0.125" material="floor_mat"/>
 <geom name="wall_back" type="box" pos="-1.6 0 1.5" size="0.01 3 1.5" material="wall_mat" contype="0" conaffinity="0" group="1"/>
 <geom name="wall_left" type="box" pos="0 3 1.5" size="3 0.01 1.5" material="wall_mat" contype="0" conaffinity="0" group="1"/>

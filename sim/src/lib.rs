@@ -12,3 +12,4 @@ pub mod controller;
 pub mod env;
 
 pub use env::{Env, EnvConfig, EnvError, Observation};
+pub mod bench;

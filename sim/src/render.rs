@@ -88,7 +88,7 @@ type FnCreateContext =
     unsafe extern "C" fn(EglDisplay, EglConfig, EglContext, *const EglInt) -> EglContext;
 type FnMakeCurrent = unsafe extern "C" fn(EglDisplay, *mut c_void, *mut c_void, EglContext) -> u32;
 type FnDestroyContext = unsafe extern "C" fn(EglDisplay, EglContext) -> u32;
-type FnTerminate = unsafe extern "C" fn(EglDisplay) -> u32;
+type FnGetCurrentContext = unsafe extern "C" fn() -> EglContext;
 type FnGetError = unsafe extern "C" fn() -> EglInt;
 type FnGlGetString = unsafe extern "C" fn(u32) -> *const u8;
 
@@ -99,7 +99,7 @@ struct GlContext {
     context: EglContext,
     make_current: FnMakeCurrent,
     destroy_context: FnDestroyContext,
-    terminate: FnTerminate,
+    get_current_context: FnGetCurrentContext,
     info: GlInfo,
 }
 
@@ -150,8 +150,8 @@ impl GlContext {
             let create_context: FnCreateContext = sym(&lib, b"eglCreateContext\0")?;
             let make_current: FnMakeCurrent = sym(&lib, b"eglMakeCurrent\0")?;
             let destroy_context: FnDestroyContext = sym(&lib, b"eglDestroyContext\0")?;
-            let terminate: FnTerminate = sym(&lib, b"eglTerminate\0")?;
             let get_error: FnGetError = sym(&lib, b"eglGetError\0")?;
+            let get_current_context: FnGetCurrentContext = sym(&lib, b"eglGetCurrentContext\0")?;
 
             let client_ext = cstr(query_string(std::ptr::null_mut(), EGL_EXTENSIONS));
             let gpd = get_proc(c"eglGetPlatformDisplayEXT".as_ptr());
@@ -224,24 +224,20 @@ impl GlContext {
             let mut config: EglConfig = std::ptr::null_mut();
             let mut n = 0;
             if choose_config(display, attribs.as_ptr(), &mut config, 1, &mut n) == 0 || n < 1 {
-                terminate(display);
                 return Err(RenderError::Gl("no EGL config with desktop OpenGL".into()));
             }
             if bind_api(EGL_OPENGL_API) == 0 {
-                terminate(display);
                 return Err(RenderError::Gl("eglBindAPI(EGL_OPENGL_API) failed".into()));
             }
             // Default attributes: a compatibility-profile context, which MuJoCo 2.2.2 needs.
             let context = create_context(display, config, std::ptr::null_mut(), [EGL_NONE].as_ptr());
             if context.is_null() {
                 let e = get_error();
-                terminate(display);
                 return Err(RenderError::Gl(format!("eglCreateContext failed (0x{e:x})")));
             }
             if make_current(display, std::ptr::null_mut(), std::ptr::null_mut(), context) == 0 {
                 let e = get_error();
                 destroy_context(display, context);
-                terminate(display);
                 return Err(RenderError::Gl(format!(
                     "eglMakeCurrent without a surface failed (0x{e:x})"
                 )));
@@ -270,7 +266,7 @@ impl GlContext {
                 context,
                 make_current,
                 destroy_context,
-                terminate,
+                get_current_context,
                 info,
             })
         }
@@ -286,16 +282,19 @@ impl GlContext {
 
 impl Drop for GlContext {
     fn drop(&mut self) {
-        // SAFETY: release the context from this thread, then destroy it and the display connection.
+        // The display is shared by every context of the process (EGL hands out one display per platform),
+        // so it is never terminated here: that would break other live renderers.
+        // SAFETY: release our context if it is current on this thread, then destroy it.
         unsafe {
-            (self.make_current)(
-                self.display,
-                std::ptr::null_mut(),
-                std::ptr::null_mut(),
-                std::ptr::null_mut(),
-            );
+            if (self.get_current_context)() == self.context {
+                (self.make_current)(
+                    self.display,
+                    std::ptr::null_mut(),
+                    std::ptr::null_mut(),
+                    std::ptr::null_mut(),
+                );
+            }
             (self.destroy_context)(self.display, self.context);
-            (self.terminate)(self.display);
         }
     }
 }
@@ -636,6 +635,20 @@ impl Renderer {
             frame.segmentation = Some(flip_rows(&ids, width, height, 1));
         }
         Ok(frame)
+    }
+
+    /// Raw scene, context, option and perturbation pointers (for the bare-FFI benchmark), with the GL
+    /// context made current.
+    pub(crate) fn raw_parts(
+        &mut self,
+    ) -> (
+        *mut ffi::mjvScene,
+        *const ffi::mjrContext,
+        *const ffi::mjvOption,
+        *const ffi::mjvPerturb,
+    ) {
+        self.gl.make_current();
+        (&mut *self.scene, &*self.context, &self.option, &self.perturb)
     }
 
     /// Convenience: render camera `name` at `size × size`.

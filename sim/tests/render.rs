@@ -141,3 +141,19 @@ fn rendering_is_deterministic() {
     let b = r.render_named(&mut data, "top", 64, Channels::ALL).unwrap();
     assert_eq!(a, b);
 }
+
+#[test]
+fn dropping_one_renderer_leaves_another_working() {
+    let (model, mut data, mut a) = setup();
+    let before = a.render_named(&mut data, "top", 64, Channels::RGB).unwrap();
+    {
+        let mut b = Renderer::new(&model, 64, 64, RenderQuality::default()).unwrap();
+        let fb = b.render_named(&mut data, "top", 64, Channels::RGB).unwrap();
+        assert_eq!(fb, before);
+    }
+    let after = a.render_named(&mut data, "top", 64, Channels::RGB).unwrap();
+    assert_eq!(after, before);
+    // Not a blank image either.
+    let rgb = after.rgb.unwrap();
+    assert!(rgb.iter().any(|&v| v > 200) && rgb.iter().any(|&v| v < 50));
+}

@@ -1,0 +1,37 @@
+#!/usr/bin/env bash
+# One-time (idempotent) set-up on Debian 12: the system packages the workspace links or loads at run time.
+# Installs only what is missing, so a second run does nothing. Needs root or sudo for apt-get.
+set -euo pipefail
+
+PACKAGES=(
+  libmujoco-dev    # MuJoCo 2.2.2: headers + libmujoco.so (linked by the sim crate)
+  libegl1          # EGL dispatcher (libglvnd), opened at run time for headless rendering
+  libegl-dev       # unversioned libEGL.so, which MuJoCo's GL loader opens
+  libegl-mesa0     # Mesa's EGL vendor library (surfaceless platform)
+  libgl1           # desktop OpenGL dispatcher
+  libgl-dev        # unversioned libGL.so, which MuJoCo's GL loader opens
+  libgl1-mesa-dri  # Mesa's llvmpipe software rasteriser (CPU rendering)
+  ca-certificates  # cargo talks to crates.io over TLS
+)
+
+missing=()
+for p in "${PACKAGES[@]}"; do
+  if ! dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed"; then
+    missing+=("$p")
+  fi
+done
+
+if ((${#missing[@]})); then
+  SUDO=""
+  if [ "$(id -u)" -ne 0 ]; then SUDO="sudo"; fi
+  echo "setup: installing ${missing[*]}"
+  $SUDO apt-get update -qq
+  DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq --no-install-recommends "${missing[@]}" >/dev/null
+else
+  echo "setup: system packages already present"
+fi
+
+if ! command -v cargo >/dev/null 2>&1; then
+  echo "setup: cargo not found. Install Rust (1.95 or newer) with rustup, then re-run." >&2
+  exit 1
+fi
