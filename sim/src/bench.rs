@@ -33,7 +33,15 @@ pub struct BenchReport {
 
 fn action(t: usize) -> [f32; 7] {
     let s = (t as f32 * 0.1).sin();
-    [0.3 * s, 0.3 * (t as f32 * 0.07).cos(), 0.1 * s, 0.0, 0.0, 0.0, if t % 40 < 20 { -1.0 } else { 1.0 }]
+    [
+        0.3 * s,
+        0.3 * (t as f32 * 0.07).cos(),
+        0.1 * s,
+        0.0,
+        0.0,
+        0.0,
+        if t % 40 < 20 { -1.0 } else { 1.0 },
+    ]
 }
 
 /// Runs every figure with `steps` control steps each (physics figures use `steps * 25` substeps); the
@@ -122,10 +130,7 @@ fn reset_raw(data: &mut Data, ids: &PandaIds) -> Result<(), EnvError> {
 
 /// Gravity compensation only: the cheapest control that keeps the scene comparable to the Env's.
 fn hold_arm(data: &mut Data, ids: &PandaIds) {
-    let mut tau = [0.0; 7];
-    for i in 0..7 {
-        tau[i] = data.qfrc_bias()[ids.arm_dof[i]];
-    }
+    let tau: [f64; 7] = std::array::from_fn(|i| data.qfrc_bias()[ids.arm_dof[i]]);
     let ctrl = data.ctrl_mut();
     for i in 0..7 {
         ctrl[ids.arm_act[i]] = tau[i];
@@ -138,7 +143,10 @@ fn raw_loop(model: &std::sync::Arc<Model>, ids: &PandaIds, steps: usize) -> Resu
     reset_raw(&mut data, ids)?;
     // A renderer only for its GL context and MuJoCo scene/context; the loop below calls the FFI directly.
     let mut renderer = Renderer::new(model, 128, 128, RenderQuality::default())?;
-    let cams = [renderer.camera_id(AGENTVIEW)?, renderer.camera_id(EYE_IN_HAND)?];
+    let cams = [
+        renderer.camera_id(AGENTVIEW)?,
+        renderer.camera_id(EYE_IN_HAND)?,
+    ];
     let (scene, context, option, perturb) = renderer.raw_parts();
     let mut rgb = vec![0u8; 128 * 128 * 3];
     let viewport = ffi::mjrRect {

@@ -38,7 +38,11 @@ pub fn axis_angle_to_mat(v: [f64; 3]) -> Matrix3<f64> {
 pub fn mat_to_quat(r: &Matrix3<f64>) -> [f64; 4] {
     let q = nalgebra::UnitQuaternion::from_matrix(r);
     let (w, x, y, z) = (q.w, q.i, q.j, q.k);
-    if w < 0.0 { [-w, -x, -y, -z] } else { [w, x, y, z] }
+    if w < 0.0 {
+        [-w, -x, -y, -z]
+    } else {
+        [w, x, y, z]
+    }
 }
 
 /// Quaternion (w, x, y, z) → axis-angle 3-vector, as robosuite's `quat2axisangle` (angle = 2·acos(w), no
@@ -264,7 +268,10 @@ mod tests {
         for _ in 0..100 {
             t = g.substep(-1.0);
         }
-        assert!((t[0] - 0.04).abs() < 1e-12 && (t[1] + 0.04).abs() < 1e-12, "open {t:?}");
+        assert!(
+            (t[0] - 0.04).abs() < 1e-12 && (t[1] + 0.04).abs() < 1e-12,
+            "open {t:?}"
+        );
         for _ in 0..199 {
             t = g.substep(1.0);
         }

@@ -14,7 +14,9 @@ use rand_chacha::ChaCha8Rng;
 use crate::controller::{GripperRamp, OscPose, quat_to_axis_angle};
 use crate::mujoco::{Data, MjError, Model, ObjType};
 use crate::render::{Channels, RenderError, RenderQuality, Renderer};
-use crate::robot::{BASE_POS, ENV_CONAFFINITY, ENV_CONTYPE, INIT_FINGERS, INIT_QPOS, PandaIds, panda_xml};
+use crate::robot::{
+    BASE_POS, ENV_CONAFFINITY, ENV_CONTYPE, INIT_FINGERS, INIT_QPOS, PandaIds, panda_xml,
+};
 
 /// Physics substeps per control step (0.05 s / 0.002 s).
 pub const SUBSTEPS: usize = 25;
@@ -192,7 +194,12 @@ impl Env {
         let mut data = Data::new(model.clone())?;
         data.forward()?;
         let renderer = if cfg.render {
-            Some(Renderer::new(&model, cfg.image_size, cfg.image_size, cfg.quality)?)
+            Some(Renderer::new(
+                &model,
+                cfg.image_size,
+                cfg.image_size,
+                cfg.quality,
+            )?)
         } else {
             None
         };
@@ -248,7 +255,11 @@ impl Env {
         {
             let qpos = self.data.qpos_mut();
             for i in 0..7 {
-                let n = if noise > 0.0 { gaussian(&mut rng) * noise } else { 0.0 };
+                let n = if noise > 0.0 {
+                    gaussian(&mut rng) * noise
+                } else {
+                    0.0
+                };
                 qpos[self.ids.arm_qpos[i]] = INIT_QPOS[i] + n;
             }
             qpos[self.ids.finger_qpos[0]] = INIT_FINGERS[0];
@@ -257,7 +268,15 @@ impl Env {
             let y = rng.random_range(-0.15..0.15);
             let yaw: f64 = rng.random_range(0.0..std::f64::consts::TAU);
             let c = self.cube_qpos;
-            qpos[c..c + 7].copy_from_slice(&[x, y, 0.92, (yaw / 2.0).cos(), 0.0, 0.0, (yaw / 2.0).sin()]);
+            qpos[c..c + 7].copy_from_slice(&[
+                x,
+                y,
+                0.92,
+                (yaw / 2.0).cos(),
+                0.0,
+                0.0,
+                (yaw / 2.0).sin(),
+            ]);
         }
         self.data.qvel_mut().fill(0.0);
         self.data.ctrl_mut().fill(0.0);
@@ -278,7 +297,10 @@ impl Env {
     /// Runs the control loop for one action without rendering or observing.
     pub fn step_physics(&mut self, action: &[f32]) -> Result<(), EnvError> {
         if action.len() != 7 {
-            return Err(EnvError::Action(format!("expected 7 values, got {}", action.len())));
+            return Err(EnvError::Action(format!(
+                "expected 7 values, got {}",
+                action.len()
+            )));
         }
         if let Some(i) = action.iter().position(|a| !a.is_finite()) {
             return Err(EnvError::Action(format!("value {i} is {}", action[i])));
@@ -287,7 +309,8 @@ impl Env {
         // Invariant: positions and velocities are computed (forward at reset, step1 after each substep).
         for sub in 0..SUBSTEPS {
             if sub == 0 {
-                self.osc.set_goal(&self.data, [a[0], a[1], a[2], a[3], a[4], a[5]]);
+                self.osc
+                    .set_goal(&self.data, [a[0], a[1], a[2], a[3], a[4], a[5]]);
             }
             let tau = self.osc.torques(&mut self.data);
             let fingers = self.gripper.substep(a[6]);

@@ -5,11 +5,11 @@
 //! (EGL surfaceless offscreen rendering: RGB, depth, segmentation), [`robot`] (the Panda MJCF and its
 //! constants), [`controller`] (OSC_POSE and the gripper ramp), [`env`] (reset/step/observe).
 
+pub mod controller;
+pub mod env;
 pub mod mujoco;
 pub mod render;
 pub mod robot;
-pub mod controller;
-pub mod env;
 
 pub use env::{Env, EnvConfig, EnvError, Observation};
 pub mod bench;

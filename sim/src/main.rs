@@ -6,11 +6,15 @@ use std::process::ExitCode;
 use anyhow::Context;
 use clap::{Parser, Subcommand, ValueEnum};
 use sim::env::{Env, EnvConfig, EnvError};
-use sim::mujoco::{self, Data, Model, MjError};
+use sim::mujoco::{self, Data, MjError, Model};
 use sim::render::{Channels, RenderError, RenderQuality, Renderer, save_png};
 
 #[derive(Parser)]
-#[command(name = "sim", version, about = "LIBERO-style simulator on MuJoCo 2.2.2")]
+#[command(
+    name = "sim",
+    version,
+    about = "LIBERO-style simulator on MuJoCo 2.2.2"
+)]
 struct Cli {
     #[command(subcommand)]
     command: Command,
@@ -116,7 +120,13 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             println!("gl_vendor: {}", gl.vendor);
             println!("gl_renderer: {}", gl.renderer);
             println!("gl_version: {}", gl.version);
-            println!("scene: nq {} nv {} nu {} ngeom {}", model.nq(), model.nv(), model.nu(), model.ngeom());
+            println!(
+                "scene: nq {} nv {} nu {} ngeom {}",
+                model.nq(),
+                model.nv(),
+                model.nu(),
+                model.ngeom()
+            );
             Ok(())
         }
         Command::Render {
@@ -128,16 +138,19 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             quality,
         } => {
             if size == 0 || size > 4096 {
-                return Err(BadInput(format!("--size must be between 1 and 4096, got {size}")).into());
+                return Err(
+                    BadInput(format!("--size must be between 1 and 4096, got {size}")).into(),
+                );
             }
             let quality = match quality {
                 Quality::Fast => RenderQuality::default(),
                 Quality::High => RenderQuality::high(),
             };
-            if let Some(dir) = out.parent().filter(|d| !d.as_os_str().is_empty()) {
-                if !dir.is_dir() {
-                    return Err(BadInput(format!("output folder {} does not exist", dir.display())).into());
-                }
+            if let Some(dir) = out.parent().filter(|d| !d.as_os_str().is_empty())
+                && !dir.is_dir()
+            {
+                let msg = format!("output folder {} does not exist", dir.display());
+                return Err(BadInput(msg).into());
             }
             let frame = match mjcf {
                 Some(path) => {
@@ -147,6 +160,8 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                     let mut data = Data::new(model.clone())?;
                     data.forward()?;
                     let mut r = Renderer::new(&model, size, size, quality)?;
+                    // A user's file may keep its visuals in group 0, which our LIBERO scenes hide.
+                    r.set_geom_group_visible(0, true);
                     r.render_named(&mut data, &camera, size, Channels::RGB)
                         .map_err(|e| classify(e.into()))?
                 }
@@ -182,10 +197,19 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                 println!("renderer               {}", r.gl_renderer);
                 println!("physics steps/s        {:>10.0}", r.physics_steps_per_s);
                 println!("render fps (128², RGB) {:>10.1}", r.render_fps_128);
-                println!("raw loop steps/s       {:>10.1}  (25 substeps + 2×128² RGB, bare FFI)", r.raw_loop_steps_per_s);
-                println!("env steps/s            {:>10.1}  (same work through Env)", r.env_steps_per_s);
+                println!(
+                    "raw loop steps/s       {:>10.1}  (25 substeps + 2×128² RGB, bare FFI)",
+                    r.raw_loop_steps_per_s
+                );
+                println!(
+                    "env steps/s            {:>10.1}  (same work through Env)",
+                    r.env_steps_per_s
+                );
                 println!("env / raw              {:>10.3}", r.env_over_raw);
-                println!("env steps/s, no render {:>10.1}", r.env_state_only_steps_per_s);
+                println!(
+                    "env steps/s, no render {:>10.1}",
+                    r.env_state_only_steps_per_s
+                );
             }
             Ok(())
         }

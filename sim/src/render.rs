@@ -156,7 +156,9 @@ impl GlContext {
             let client_ext = cstr(query_string(std::ptr::null_mut(), EGL_EXTENSIONS));
             let gpd = get_proc(c"eglGetPlatformDisplayEXT".as_ptr());
             if gpd.is_null() {
-                return Err(RenderError::Gl("EGL has no eglGetPlatformDisplayEXT".into()));
+                return Err(RenderError::Gl(
+                    "EGL has no eglGetPlatformDisplayEXT".into(),
+                ));
             }
             let get_platform_display: FnGetPlatformDisplay = std::mem::transmute(gpd);
 
@@ -172,7 +174,10 @@ impl GlContext {
                 if !d.is_null() && initialize(d, &mut maj, &mut min) != 0 {
                     chosen = Some((d, "surfaceless"));
                 } else {
-                    attempts.push(format!("surfaceless platform failed (EGL error 0x{:x})", get_error()));
+                    attempts.push(format!(
+                        "surfaceless platform failed (EGL error 0x{:x})",
+                        get_error()
+                    ));
                 }
             } else {
                 attempts.push("no EGL_MESA_platform_surfaceless".to_string());
@@ -185,7 +190,11 @@ impl GlContext {
                     let mut n = 0;
                     if query_devices(16, devices.as_mut_ptr(), &mut n) != 0 {
                         for dev in devices.iter().take(n.max(0) as usize) {
-                            let d = get_platform_display(EGL_PLATFORM_DEVICE_EXT, *dev, std::ptr::null());
+                            let d = get_platform_display(
+                                EGL_PLATFORM_DEVICE_EXT,
+                                *dev,
+                                std::ptr::null(),
+                            );
                             let (mut maj, mut min) = (0, 0);
                             if !d.is_null() && initialize(d, &mut maj, &mut min) != 0 {
                                 chosen = Some((d, "device"));
@@ -230,10 +239,13 @@ impl GlContext {
                 return Err(RenderError::Gl("eglBindAPI(EGL_OPENGL_API) failed".into()));
             }
             // Default attributes: a compatibility-profile context, which MuJoCo 2.2.2 needs.
-            let context = create_context(display, config, std::ptr::null_mut(), [EGL_NONE].as_ptr());
+            let context =
+                create_context(display, config, std::ptr::null_mut(), [EGL_NONE].as_ptr());
             if context.is_null() {
                 let e = get_error();
-                return Err(RenderError::Gl(format!("eglCreateContext failed (0x{e:x})")));
+                return Err(RenderError::Gl(format!(
+                    "eglCreateContext failed (0x{e:x})"
+                )));
             }
             if make_current(display, std::ptr::null_mut(), std::ptr::null_mut(), context) == 0 {
                 let e = get_error();
@@ -275,7 +287,12 @@ impl GlContext {
     fn make_current(&self) {
         // SAFETY: display and context are valid until drop.
         unsafe {
-            (self.make_current)(self.display, std::ptr::null_mut(), std::ptr::null_mut(), self.context);
+            (self.make_current)(
+                self.display,
+                std::ptr::null_mut(),
+                std::ptr::null_mut(),
+                self.context,
+            );
         }
     }
 }
@@ -302,7 +319,7 @@ impl Drop for GlContext {
 // --- MuJoCo renderer -------------------------------------------------------------------------------
 
 /// Rendering quality knobs. The defaults are the fast ones (all off), as used for datasets.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
 pub struct RenderQuality {
     /// Shadow maps from lights that cast shadows.
     pub shadows: bool,
@@ -310,16 +327,6 @@ pub struct RenderQuality {
     pub msaa_samples: u32,
     /// Reflections on reflective materials.
     pub reflections: bool,
-}
-
-impl Default for RenderQuality {
-    fn default() -> Self {
-        RenderQuality {
-            shadows: false,
-            msaa_samples: 0,
-            reflections: false,
-        }
-    }
 }
 
 impl RenderQuality {
@@ -396,7 +403,12 @@ impl Renderer {
     /// Creates a renderer for `model` able to render images up to `max_width × max_height`.
     ///
     /// Geom group 0 (collision-only geoms) is hidden, as in LIBERO.
-    pub fn new(model: &Model, max_width: usize, max_height: usize, quality: RenderQuality) -> Result<Renderer> {
+    pub fn new(
+        model: &Model,
+        max_width: usize,
+        max_height: usize,
+        quality: RenderQuality,
+    ) -> Result<Renderer> {
         if max_width == 0 || max_height == 0 || max_width > 8192 || max_height > 8192 {
             return Err(RenderError::BadSize {
                 width: max_width,
@@ -433,9 +445,12 @@ impl Renderer {
             });
             if let Err(e) = made {
                 ffi::mjv_freeScene(scn_ptr);
-                return Err(RenderError::Gl(format!("MuJoCo could not set up OpenGL: {e}")));
+                return Err(RenderError::Gl(format!(
+                    "MuJoCo could not set up OpenGL: {e}"
+                )));
             }
-            if (context.offWidth as usize) < max_width || (context.offHeight as usize) < max_height {
+            if (context.offWidth as usize) < max_width || (context.offHeight as usize) < max_height
+            {
                 ffi::mjr_freeContext(con_ptr);
                 ffi::mjv_freeScene(scn_ptr);
                 return Err(RenderError::BadSize {
@@ -489,6 +504,13 @@ impl Renderer {
     /// The OpenGL implementation in use.
     pub fn gl_info(&self) -> &GlInfo {
         &self.gl.info
+    }
+
+    /// Shows or hides geom group `group` (0–5). Group 0 (collision-only geoms in LIBERO scenes) starts hidden.
+    pub fn set_geom_group_visible(&mut self, group: usize, visible: bool) {
+        if let Some(g) = self.option.geomgroup.get_mut(group) {
+            *g = visible as u8;
+        }
     }
 
     /// The quality settings in use.
@@ -564,7 +586,8 @@ impl Renderer {
         let d = data.ptr();
         let scn: *mut ffi::mjvScene = &mut *self.scene;
         let con: *const ffi::mjrContext = &*self.context;
-        let (opt, pert): (*const ffi::mjvOption, *const ffi::mjvPerturb) = (&self.option, &self.perturb);
+        let (opt, pert): (*const ffi::mjvOption, *const ffi::mjvPerturb) =
+            (&self.option, &self.perturb);
         let n = width * height;
         // SAFETY: all pointers are valid; buffers hold max_width*max_height entries.
         unsafe {
@@ -612,7 +635,12 @@ impl Renderer {
             let r = unsafe {
                 guard(|| {
                     ffi::mjr_render(viewport, scn, con);
-                    ffi::mjr_readPixels(self.rgb_buf.as_mut_ptr(), std::ptr::null_mut(), viewport, con);
+                    ffi::mjr_readPixels(
+                        self.rgb_buf.as_mut_ptr(),
+                        std::ptr::null_mut(),
+                        viewport,
+                        con,
+                    );
                 })
             };
             self.scene.flags[ffi::mjRND_SEGMENT as usize] = 0;
@@ -629,7 +657,11 @@ impl Renderer {
                         return -1;
                     }
                     let g = &geoms[seg as usize];
-                    if g.objtype == ffi::mjOBJ_GEOM as i32 { g.objid } else { -1 }
+                    if g.objtype == ffi::mjOBJ_GEOM as i32 {
+                        g.objid
+                    } else {
+                        -1
+                    }
                 })
                 .collect();
             frame.segmentation = Some(flip_rows(&ids, width, height, 1));
@@ -648,11 +680,22 @@ impl Renderer {
         *const ffi::mjvPerturb,
     ) {
         self.gl.make_current();
-        (&mut *self.scene, &*self.context, &self.option, &self.perturb)
+        (
+            &mut *self.scene,
+            &*self.context,
+            &self.option,
+            &self.perturb,
+        )
     }
 
     /// Convenience: render camera `name` at `size × size`.
-    pub fn render_named(&mut self, data: &mut Data, name: &str, size: usize, channels: Channels) -> Result<Frame> {
+    pub fn render_named(
+        &mut self,
+        data: &mut Data,
+        name: &str,
+        size: usize,
+        channels: Channels,
+    ) -> Result<Frame> {
         let id = self.camera_id(name)?;
         self.render(data, id, size, size, channels)
     }
@@ -672,7 +715,11 @@ impl Drop for Renderer {
 /// Reverses the row order of a `[height, width, channels]` buffer (OpenGL rows are bottom-up).
 pub fn flip_rows<T: Copy>(buf: &[T], width: usize, height: usize, channels: usize) -> Vec<T> {
     let row = width * channels;
-    assert_eq!(buf.len(), row * height, "buffer is not [height, width, channels]");
+    assert_eq!(
+        buf.len(),
+        row * height,
+        "buffer is not [height, width, channels]"
+    );
     let mut out = Vec::with_capacity(buf.len());
     for r in (0..height).rev() {
         out.extend_from_slice(&buf[r * row..(r + 1) * row]);
@@ -683,7 +730,13 @@ pub fn flip_rows<T: Copy>(buf: &[T], width: usize, height: usize, channels: usiz
 /// Maps a geom-id segmentation image to body ids (−1 stays −1).
 pub fn geoms_to_bodies(model: &Model, seg: &[i32]) -> Vec<i32> {
     seg.iter()
-        .map(|&g| if g < 0 { -1 } else { model.geom_body(g as usize) as i32 })
+        .map(|&g| {
+            if g < 0 {
+                -1
+            } else {
+                model.geom_body(g as usize) as i32
+            }
+        })
         .collect()
 }
 

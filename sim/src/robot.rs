@@ -11,7 +11,7 @@
 
 use std::fmt::Write;
 
-use crate::mujoco::{Model, MjError, ObjType};
+use crate::mujoco::{MjError, Model, ObjType};
 
 /// `contype` for table, fixtures and objects.
 pub const ENV_CONTYPE: u32 = 1;
@@ -52,7 +52,9 @@ pub const TORQUE_LIMITS: [f64; 7] = [80.0, 80.0, 80.0, 80.0, 80.0, 12.0, 12.0];
 /// Arm joint damping.
 const DAMPING: [f64; 7] = [0.1, 0.1, 0.1, 0.1, 0.1, 0.01, 0.01];
 
-/// Link frames: (body pos in parent, body quat wxyz in parent), robosuite's Panda.
+/// Link frames: (body pos in parent, body quat wxyz in parent), robosuite's Panda. The literal 0.707107
+/// is robosuite's own rounding (kept so that the kinematics match it to the last digit).
+#[allow(clippy::approx_constant)]
 const LINKS: [([f64; 3], [f64; 4]); 7] = [
     ([0.0, 0.0, 0.333], [1.0, 0.0, 0.0, 0.0]),
     ([0.0, 0.0, 0.0], [0.707107, -0.707107, 0.0, 0.0]),
@@ -75,13 +77,31 @@ const INERTIALS: [(f64, [f64; 3], f64); 7] = [
 ];
 
 /// Primitive link shapes: capsule segments (from, to, radius) in each link's frame.
-const SHAPES: [&[([f64; 3], [f64; 3], f64)]; 7] = [
+/// A capsule segment: from, to, radius.
+type Capsule = ([f64; 3], [f64; 3], f64);
+
+const SHAPES: [&[Capsule]; 7] = [
     &[([0.0, 0.0, -0.19], [0.0, 0.0, -0.02], 0.06)],
-    &[([0.0, 0.0, -0.06], [0.0, 0.0, 0.06], 0.06), ([0.0, 0.0, 0.0], [0.0, -0.2, 0.0], 0.06)],
-    &[([0.0, 0.0, -0.12], [0.0, 0.0, -0.02], 0.055), ([0.0, 0.0, 0.0], [0.0825, 0.0, 0.0], 0.055)],
-    &[([0.0, 0.0, -0.05], [0.0, 0.0, 0.05], 0.055), ([0.0, 0.0, 0.0], [-0.0825, 0.06, 0.0], 0.055)],
-    &[([0.0, 0.0, -0.3], [0.0, 0.0, -0.22], 0.055), ([0.0, 0.08, -0.22], [0.0, 0.08, -0.04], 0.035)],
-    &[([0.0, 0.0, -0.03], [0.0, 0.0, 0.02], 0.05), ([0.0, 0.0, 0.0], [0.088, 0.0, 0.0], 0.045)],
+    &[
+        ([0.0, 0.0, -0.06], [0.0, 0.0, 0.06], 0.06),
+        ([0.0, 0.0, 0.0], [0.0, -0.2, 0.0], 0.06),
+    ],
+    &[
+        ([0.0, 0.0, -0.12], [0.0, 0.0, -0.02], 0.055),
+        ([0.0, 0.0, 0.0], [0.0825, 0.0, 0.0], 0.055),
+    ],
+    &[
+        ([0.0, 0.0, -0.05], [0.0, 0.0, 0.05], 0.055),
+        ([0.0, 0.0, 0.0], [-0.0825, 0.06, 0.0], 0.055),
+    ],
+    &[
+        ([0.0, 0.0, -0.3], [0.0, 0.0, -0.22], 0.055),
+        ([0.0, 0.08, -0.22], [0.0, 0.08, -0.04], 0.035),
+    ],
+    &[
+        ([0.0, 0.0, -0.03], [0.0, 0.0, 0.02], 0.05),
+        ([0.0, 0.0, 0.0], [0.088, 0.0, 0.0], 0.045),
+    ],
     &[([0.0, 0.0, -0.02], [0.0, 0.0, 0.07], 0.045)],
 ];
 
@@ -141,7 +161,11 @@ pub fn panda_xml(base_pos: [f64; 3]) -> PandaXml {
             n = i + 1,
         );
         for (k, (from, to, r)) in SHAPES[i].iter().enumerate() {
-            let class = if k == 0 && i % 2 == 1 { "panda_dark" } else { "panda_link" };
+            let class = if k == 0 && i % 2 == 1 {
+                "panda_dark"
+            } else {
+                "panda_link"
+            };
             let _ = writeln!(
                 b,
                 r#"<geom name="robot0_link{}_g{k}" class="{class}" fromto="{} {}" size="{r}"/>"#,
@@ -190,8 +214,7 @@ pub fn panda_xml(base_pos: [f64; 3]) -> PandaXml {
     b.push_str("</body>\n</body>\n");
 
     let mut a = String::new();
-    for i in 0..7 {
-        let t = TORQUE_LIMITS[i];
+    for (i, &t) in TORQUE_LIMITS.iter().enumerate() {
         let _ = writeln!(
             a,
             r#"<motor name="robot0_torq_j{n}" joint="robot0_joint{n}" ctrllimited="true" ctrlrange="{} {t}" gear="1"/>"#,
@@ -305,7 +328,10 @@ mod tests {
             BASE_POS[2] + 0.333 + 0.316 + 0.384 - 0.1065,
         ];
         for k in 0..3 {
-            assert!((hand[k] - expect[k]).abs() < 1e-4, "hand {hand:?} vs {expect:?}");
+            assert!(
+                (hand[k] - expect[k]).abs() < 1e-4,
+                "hand {hand:?} vs {expect:?}"
+            );
         }
         // Grip site a further 0.097 down.
         let site = d.site_pos(ids.grip_site);

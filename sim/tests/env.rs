@@ -11,19 +11,13 @@ fn state_only() -> Env {
     .unwrap()
 }
 
-fn rot_angle_between(a: [f64; 4], b: [f64; 4]) -> f64 {
-    // quaternions (w, x, y, z): angle = 2 acos(|<a, b>|)
-    let dot = (a[0] * b[0] + a[1] * b[1] + a[2] * b[2] + a[3] * b[3]).abs().min(1.0);
-    2.0 * dot.acos()
-}
-
 #[test]
 fn reset_puts_the_arm_at_liberos_init_pose() {
     let mut env = state_only();
     let obs = env.reset(0).unwrap();
     let init = sim::robot::INIT_QPOS;
-    for i in 0..7 {
-        assert!((obs.joint_state[i] as f64 - init[i]).abs() < 1e-6);
+    for (q, q0) in obs.joint_state.iter().zip(init) {
+        assert!((*q as f64 - q0).abs() < 1e-6);
     }
     assert!((obs.state[6] - 0.020833).abs() < 1e-6 && (obs.state[7] + 0.020833).abs() < 1e-6);
     // LIBERO's init pose puts the gripper above the table, in front of the robot, pointing down.
@@ -41,7 +35,10 @@ fn zero_action_drifts_less_than_2mm_over_100_steps() {
     for _ in 0..100 {
         last = env.step(&[0.0; 7]).unwrap().eef_pos;
     }
-    let d = ((last[0] - start[0]).powi(2) + (last[1] - start[1]).powi(2) + (last[2] - start[2]).powi(2)).sqrt();
+    let d = ((last[0] - start[0]).powi(2)
+        + (last[1] - start[1]).powi(2)
+        + (last[2] - start[2]).powi(2))
+    .sqrt();
     assert!(d < 0.002, "drift {d} m");
 }
 
@@ -86,7 +83,9 @@ fn rotation_action_rotates_about_world_z() {
 }
 
 fn quat_to_mat(q: [f64; 4]) -> nalgebra::Matrix3<f64> {
-    let uq = nalgebra::UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(q[0], q[1], q[2], q[3]));
+    let uq = nalgebra::UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(
+        q[0], q[1], q[2], q[3],
+    ));
     uq.to_rotation_matrix().into_inner()
 }
 
@@ -98,19 +97,36 @@ fn gripper_opens_and_closes_fully_within_10_steps() {
     env.reset(5).unwrap();
     let mut s = [0.0f32; 8];
     for _ in 0..10 {
-        s = env.step(&[0.0, 0.0, 0.0, 0.0, 0.0, 0.0, -1.0]).unwrap().state;
+        s = env
+            .step(&[0.0, 0.0, 0.0, 0.0, 0.0, 0.0, -1.0])
+            .unwrap()
+            .state;
     }
     assert!(s[6] > 0.037 && s[7] < -0.037, "open fingers {:?}", &s[6..]);
     for _ in 0..10 {
-        s = env.step(&[0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0]).unwrap().state;
+        s = env
+            .step(&[0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0])
+            .unwrap()
+            .state;
     }
     // ≥ 89 % of the 0.04 m travel within 10 steps…
-    assert!(s[6] < 0.0045 && s[7] > -0.0045, "closed fingers after 10 steps {:?}", &s[6..]);
+    assert!(
+        s[6] < 0.0045 && s[7] > -0.0045,
+        "closed fingers after 10 steps {:?}",
+        &s[6..]
+    );
     for _ in 0..4 {
-        s = env.step(&[0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0]).unwrap().state;
+        s = env
+            .step(&[0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0])
+            .unwrap()
+            .state;
     }
     // …and within the friction band (< 1.5 mm) a few steps later.
-    assert!(s[6] < 0.0015 && s[7] > -0.0015, "closed fingers after 14 steps {:?}", &s[6..]);
+    assert!(
+        s[6] < 0.0015 && s[7] > -0.0015,
+        "closed fingers after 14 steps {:?}",
+        &s[6..]
+    );
     // The hold command (0) keeps the fingers where they are.
     let held = env.step(&[0.0; 7]).unwrap().state;
     assert!((held[6] - s[6]).abs() < 5e-4, "{held:?}");
@@ -120,7 +136,12 @@ fn gripper_opens_and_closes_fully_within_10_steps() {
 fn bad_actions_are_errors() {
     let mut env = state_only();
     env.reset(0).unwrap();
-    assert!(env.step(&[0.0; 6]).unwrap_err().to_string().contains("expected 7"));
+    assert!(
+        env.step(&[0.0; 6])
+            .unwrap_err()
+            .to_string()
+            .contains("expected 7")
+    );
     assert!(env.step(&[0.0, f32::NAN, 0.0, 0.0, 0.0, 0.0, 0.0]).is_err());
 }
 
@@ -138,7 +159,15 @@ fn same_seed_same_actions_identical_observations_with_images() {
     let mut ob = b.reset(42).unwrap();
     assert_eq!(oa, ob);
     for t in 0..15 {
-        let act = [0.5 * ((t as f32) * 0.3).sin(), 0.3, -0.2, 0.0, 0.1, 0.0, if t < 7 { -1.0 } else { 1.0 }];
+        let act = [
+            0.5 * ((t as f32) * 0.3).sin(),
+            0.3,
+            -0.2,
+            0.0,
+            0.1,
+            0.0,
+            if t < 7 { -1.0 } else { 1.0 },
+        ];
         oa = a.step(&act).unwrap();
         ob = b.step(&act).unwrap();
     }
@@ -168,4 +197,36 @@ fn segmentation_sees_the_table_robot_and_box() {
         let n = seg.iter().filter(|&&s| s == id(name)).count();
         assert!(n > 10, "{name}: {n} pixels");
     }
+}
+
+#[test]
+fn the_box_rests_on_the_table_with_contacts() {
+    let mut env = state_only();
+    env.reset(9).unwrap();
+    for _ in 0..20 {
+        env.step(&[0.0; 7]).unwrap();
+    }
+    let model = env.model().clone();
+    let cube = model.id(sim::mujoco::ObjType::Geom, "cube_g").unwrap();
+    let table = model
+        .id(sim::mujoco::ObjType::Geom, "table_collision")
+        .unwrap();
+    let contacts = env.data().contacts();
+    let touching: Vec<_> = contacts
+        .iter()
+        .filter(|c| (c.geom1 == cube && c.geom2 == table) || (c.geom1 == table && c.geom2 == cube))
+        .collect();
+    assert!(
+        !touching.is_empty(),
+        "no cube–table contact among {contacts:?}"
+    );
+    for c in &touching {
+        assert!(
+            c.dist.abs() < 0.002 && (c.pos[2] - 0.90).abs() < 0.003,
+            "{c:?}"
+        );
+        assert!(c.normal[2].abs() > 0.99, "{c:?}");
+    }
+    let z = env.cube_pos()[2];
+    assert!((z - 0.92).abs() < 0.002, "cube centre at z = {z}");
 }

@@ -19,7 +19,9 @@ struct Sequence {
 }
 
 fn angle_between(a: [f64; 4], b: [f64; 4]) -> f64 {
-    let dot = (a[0] * b[0] + a[1] * b[1] + a[2] * b[2] + a[3] * b[3]).abs().min(1.0);
+    let dot = (a[0] * b[0] + a[1] * b[1] + a[2] * b[2] + a[3] * b[3])
+        .abs()
+        .min(1.0);
     2.0 * dot.acos()
 }
 
@@ -40,7 +42,11 @@ fn run(seq: &Sequence) -> (f64, f64, f64) {
             obs = env.step(&seq.actions[t - 1]).unwrap();
         }
         let g = seq.eef_pos[t];
-        let p = [obs.eef_pos[0] - base[0], obs.eef_pos[1] - base[1], obs.eef_pos[2] - base[2]];
+        let p = [
+            obs.eef_pos[0] - base[0],
+            obs.eef_pos[1] - base[1],
+            obs.eef_pos[2] - base[2],
+        ];
         let e = ((p[0] - g[0]).powi(2) + (p[1] - g[1]).powi(2) + (p[2] - g[2]).powi(2)).sqrt();
         dp = dp.max(e);
         dq = dq.max(angle_between(obs.eef_quat, seq.eef_quat_wxyz[t]));
@@ -57,10 +63,23 @@ fn trajectories_match_robosuite() {
     let mut report = Vec::new();
     for (name, seq) in &golden.sequences {
         let (dp, dq, dg) = run(seq);
-        report.push(format!("{name}: pos {:.2} mm, ori {:.4} rad, fingers {:.2} mm", dp * 1e3, dq, dg * 1e3));
-        assert!(dp < 0.001, "{name}: eef position differs by {:.2} mm", dp * 1e3);
+        report.push(format!(
+            "{name}: pos {:.2} mm, ori {:.4} rad, fingers {:.2} mm",
+            dp * 1e3,
+            dq,
+            dg * 1e3
+        ));
+        assert!(
+            dp < 0.001,
+            "{name}: eef position differs by {:.2} mm",
+            dp * 1e3
+        );
         assert!(dq < 0.005, "{name}: eef orientation differs by {dq:.4} rad");
-        assert!(dg < 0.0001, "{name}: finger position differs by {:.2} mm", dg * 1e3);
+        assert!(
+            dg < 0.0001,
+            "{name}: finger position differs by {:.2} mm",
+            dg * 1e3
+        );
     }
     println!("{}", report.join("\n"));
 }
@@ -89,6 +108,9 @@ fn plus_x_off_axis_drift_is_liberos() {
     let sag = (o.eef_pos[2] - o0.eef_pos[2]).abs() / dx;
     assert!(dx > 0.09, "x travel {dx}");
     assert!(dy < 0.01 * dx, "lateral drift {dy}");
-    assert!((sag - g_sag).abs() < 0.02, "z sag ratio {sag:.3} vs robosuite {g_sag:.3}");
+    assert!(
+        (sag - g_sag).abs() < 0.02,
+        "z sag ratio {sag:.3} vs robosuite {g_sag:.3}"
+    );
     assert!(angle_between(o.eef_quat, o0.eef_quat) < 0.05);
 }

@@ -44,7 +44,9 @@ fn pixel_ray(row: usize, col: usize, size: usize, fovy_deg: f64) -> [f64; 3] {
 fn renders_rgb_with_objects_where_expected() {
     let (_m, mut data, mut r) = setup();
     assert!(!r.gl_info().renderer.is_empty());
-    let f = r.render_named(&mut data, "top", 128, Channels::RGB).unwrap();
+    let f = r
+        .render_named(&mut data, "top", 128, Channels::RGB)
+        .unwrap();
     let rgb = f.rgb.unwrap();
     assert_eq!(rgb.len(), 128 * 128 * 3);
     let px = |row: usize, col: usize| {
@@ -54,22 +56,35 @@ fn renders_rgb_with_objects_where_expected() {
     // The red box is at world +y = image top half; the blue ball at −y = bottom half.
     let top = px(64 - 18, 64);
     let bottom = px(64 + 18, 64);
-    assert!(top[0] > 150 && top[1] < 110 && top[2] < 110, "top pixel {top:?}");
-    assert!(bottom[2] > 150 && bottom[0] < 110 && bottom[1] < 110, "bottom pixel {bottom:?}");
+    assert!(
+        top[0] > 150 && top[1] < 110 && top[2] < 110,
+        "top pixel {top:?}"
+    );
+    assert!(
+        bottom[2] > 150 && bottom[0] < 110 && bottom[1] < 110,
+        "bottom pixel {bottom:?}"
+    );
 }
 
 #[test]
 fn depth_agrees_with_mj_ray_to_1cm() {
     let (_m, mut data, mut r) = setup();
-    let f = r.render_named(&mut data, "top", 128, Channels::ALL).unwrap();
+    let f = r
+        .render_named(&mut data, "top", 128, Channels::ALL)
+        .unwrap();
     let depth = f.depth.unwrap();
     let mut checked = 0;
     for &(row, col) in &[(64, 64), (46, 64), (82, 64), (10, 10), (100, 30), (64, 120)] {
         let dir = pixel_ray(row, col, 128, 60.0);
-        let (dist, _) = data.ray([0.0, 0.0, 2.0], dir, -1).expect("ray hits something");
+        let (dist, _) = data
+            .ray([0.0, 0.0, 2.0], dir, -1)
+            .expect("ray hits something");
         // mj_ray returns distance in units of |dir|; dir has unit z, so depth along the axis = dist.
         let d = depth[row * 128 + col] as f64;
-        assert!((d - dist).abs() < 0.01, "pixel ({row},{col}): render {d} vs ray {dist}");
+        assert!(
+            (d - dist).abs() < 0.01,
+            "pixel ({row},{col}): render {d} vs ray {dist}"
+        );
         checked += 1;
     }
     assert_eq!(checked, 6);
@@ -95,7 +110,10 @@ fn segmentation_names_the_right_objects() {
     let name = |row: usize, col: usize| {
         let b = bodies[row * 96 + col];
         assert!(b >= 0, "pixel ({row},{col}) has no body");
-        model.name(ObjType::Body, b as usize).unwrap_or("world").to_string()
+        model
+            .name(ObjType::Body, b as usize)
+            .unwrap_or("world")
+            .to_string()
     };
     assert_eq!(name(48 - 14, 48), "red_box");
     assert_eq!(name(48 + 14, 48), "blue_ball");
@@ -113,9 +131,20 @@ fn segmentation_names_the_right_objects() {
 fn several_cameras_and_sizes_from_one_renderer() {
     let (_m, mut data, mut r) = setup();
     let a = r.render_named(&mut data, "top", 32, Channels::RGB).unwrap();
-    let b = r.render(&mut data, r.camera_id("top").unwrap(), 128, 64, Channels::RGB).unwrap();
+    let b = r
+        .render(
+            &mut data,
+            r.camera_id("top").unwrap(),
+            128,
+            64,
+            Channels::RGB,
+        )
+        .unwrap();
     assert_eq!(a.rgb.unwrap().len(), 32 * 32 * 3);
-    assert_eq!((b.width, b.height, b.rgb.unwrap().len()), (128, 64, 128 * 64 * 3));
+    assert_eq!(
+        (b.width, b.height, b.rgb.unwrap().len()),
+        (128, 64, 128 * 64 * 3)
+    );
 }
 
 #[test]
@@ -128,9 +157,13 @@ fn bad_camera_and_size_are_clear_errors() {
         }
         other => panic!("{other:?}"),
     }
-    let e = r.render_named(&mut data, "top", 256, Channels::RGB).unwrap_err();
+    let e = r
+        .render_named(&mut data, "top", 256, Channels::RGB)
+        .unwrap_err();
     assert!(e.to_string().contains("256x256"), "{e}");
-    let e = r.render_named(&mut data, "top", 0, Channels::RGB).unwrap_err();
+    let e = r
+        .render_named(&mut data, "top", 0, Channels::RGB)
+        .unwrap_err();
     assert!(matches!(e, RenderError::BadSize { .. }));
 }
 

@@ -1761,7 +1761,7 @@ unsafe extern "C-unwind" {
 }
 unsafe extern "C-unwind" {
     pub fn mj_loadModel(filename: *const ::std::os::raw::c_char, vfs: *const mjVFS)
-        -> *mut mjModel;
+    -> *mut mjModel;
 }
 unsafe extern "C-unwind" {
     pub fn mj_deleteModel(m: *mut mjModel);

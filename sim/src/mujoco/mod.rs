@@ -48,7 +48,9 @@ pub enum MjError {
         name: String,
     },
     /// The linked library is not the version this crate was written against.
-    #[error("libmujoco reports version {found}, this crate needs {expected} (Debian's libmujoco-dev 2.2.2)")]
+    #[error(
+        "libmujoco reports version {found}, this crate needs {expected} (Debian's libmujoco-dev 2.2.2)"
+    )]
     Version {
         /// `mj_version()` of the loaded library.
         found: i32,
@@ -74,7 +76,9 @@ unsafe extern "C-unwind" fn error_hook(msg: *const c_char) {
         String::from("unknown MuJoCo error")
     } else {
         // SAFETY: MuJoCo passes a NUL-terminated message.
-        unsafe { CStr::from_ptr(msg) }.to_string_lossy().into_owned()
+        unsafe { CStr::from_ptr(msg) }
+            .to_string_lossy()
+            .into_owned()
     };
     // Unwind (without running the panic hook) back to the `guard` around the FFI call.
     resume_unwind(Box::new(EnginePanic(text)));
@@ -85,11 +89,13 @@ unsafe extern "C-unwind" fn warning_hook(msg: *const c_char) {
         return;
     }
     // SAFETY: MuJoCo passes a NUL-terminated message.
-    let text = unsafe { CStr::from_ptr(msg) }.to_string_lossy().into_owned();
-    if let Ok(mut w) = WARNINGS.lock() {
-        if w.len() < 1000 {
-            w.push(text);
-        }
+    let text = unsafe { CStr::from_ptr(msg) }
+        .to_string_lossy()
+        .into_owned();
+    if let Ok(mut w) = WARNINGS.lock()
+        && w.len() < 1000
+    {
+        w.push(text);
     }
 }
 
@@ -225,15 +231,28 @@ impl Vfs {
         }
         let size = c_int::try_from(bytes.len())
             .map_err(|_| MjError::Invalid(format!("virtual file '{name}' is too large")))?;
-        let cname = CString::new(name).map_err(|_| MjError::Invalid(format!("bad name '{name}'")))?;
+        let cname =
+            CString::new(name).map_err(|_| MjError::Invalid(format!("bad name '{name}'")))?;
         let vfs = self.ptr();
         // SAFETY: vfs is initialised; MuJoCo allocates `size` bytes for the new file.
         let rc = unsafe { ffi::mj_makeEmptyFileVFS(vfs, cname.as_ptr(), size) };
         match rc {
             0 => {}
-            1 => return Err(MjError::Invalid("MuJoCo's virtual file system is full".into())),
-            2 => return Err(MjError::Invalid(format!("virtual file '{name}' added twice"))),
-            _ => return Err(MjError::Invalid(format!("could not add virtual file '{name}'"))),
+            1 => {
+                return Err(MjError::Invalid(
+                    "MuJoCo's virtual file system is full".into(),
+                ));
+            }
+            2 => {
+                return Err(MjError::Invalid(format!(
+                    "virtual file '{name}' added twice"
+                )));
+            }
+            _ => {
+                return Err(MjError::Invalid(format!(
+                    "could not add virtual file '{name}'"
+                )));
+            }
         }
         // SAFETY: the file was just created, so mj_findFileVFS returns its index, whose buffer holds `size` bytes.
         unsafe {
@@ -393,7 +412,10 @@ impl Model {
             return None;
         }
         // SAFETY: NUL-terminated string that lives as long as the model.
-        unsafe { CStr::from_ptr(p) }.to_str().ok().filter(|s| !s.is_empty())
+        unsafe { CStr::from_ptr(p) }
+            .to_str()
+            .ok()
+            .filter(|s| !s.is_empty())
     }
 
     /// Names of all objects of one kind (unnamed ones as empty strings), indexed by id.
@@ -696,7 +718,10 @@ impl Data {
     pub fn jac_site_into(&mut self, site: usize, jacp: &mut [f64], jacr: &mut [f64]) {
         let nv = self.model.nv();
         assert!(site < self.model.nsite(), "site id out of range");
-        assert!(jacp.len() == 3 * nv && jacr.len() == 3 * nv, "Jacobian buffers must be [3 * nv]");
+        assert!(
+            jacp.len() == 3 * nv && jacr.len() == 3 * nv,
+            "Jacobian buffers must be [3 * nv]"
+        );
         let (m, d) = (self.model.ptr(), self.raw.as_ptr());
         // SAFETY: buffer sizes checked.
         unsafe { ffi::mj_jacSite(m, d, jacp.as_mut_ptr(), jacr.as_mut_ptr(), site as c_int) };
@@ -819,11 +844,14 @@ mod tests {
         let text = err.to_string();
         assert!(text.contains("in-memory MJCF"), "{text}");
         assert!(text.to_lowercase().contains("xml"), "{text}");
-        let err = Model::from_xml_str("<mujoco><worldbody><geom type='sphere'/></worldbody></mujoco>")
+        let err =
+            Model::from_xml_str("<mujoco><worldbody><geom type='sphere'/></worldbody></mujoco>")
+                .err()
+                .unwrap();
+        assert!(err.to_string().contains("size"), "{err}");
+        let err = Model::from_xml_file("/nonexistent/model.xml")
             .err()
             .unwrap();
-        assert!(err.to_string().contains("size"), "{err}");
-        let err = Model::from_xml_file("/nonexistent/model.xml").err().unwrap();
         assert!(err.to_string().contains("/nonexistent/model.xml"), "{err}");
     }
 
@@ -851,7 +879,11 @@ mod tests {
         let msg = CString::new("synthetic warning").unwrap();
         // SAFETY: NUL-terminated message.
         unsafe { ffi::mju_warning(msg.as_ptr()) };
-        assert!(take_warnings().iter().any(|w| w.contains("synthetic warning")));
+        assert!(
+            take_warnings()
+                .iter()
+                .any(|w| w.contains("synthetic warning"))
+        );
         assert!(!Path::new("MUJOCO_LOG.TXT").exists());
     }
 

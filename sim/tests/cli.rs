@@ -1,0 +1,164 @@
+//! The `sim` binary: outputs, and bad input → one clear error line, exit code 2, no panic.
+
+use std::process::Command;
+
+fn sim(args: &[&str]) -> (i32, String, String) {
+    let out = Command::new(env!("CARGO_BIN_EXE_sim"))
+        .args(args)
+        .output()
+        .expect("run sim");
+    (
+        out.status.code().unwrap_or(-1),
+        String::from_utf8_lossy(&out.stdout).into_owned(),
+        String::from_utf8_lossy(&out.stderr).into_owned(),
+    )
+}
+
+fn tmp(name: &str) -> std::path::PathBuf {
+    let dir = std::env::temp_dir().join(format!("sim-cli-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    dir.join(name)
+}
+
+#[test]
+fn info_reports_mujoco_222_and_a_renderer() {
+    let (code, out, err) = sim(&["info"]);
+    assert_eq!(code, 0, "{err}");
+    assert!(out.contains("mujoco_version: 222"), "{out}");
+    assert!(out.contains("gl_renderer: "), "{out}");
+}
+
+#[test]
+fn render_writes_a_png_of_the_requested_size() {
+    let path = tmp("agent.png");
+    let (code, _, err) = sim(&["render", "--out", path.to_str().unwrap(), "--size", "96"]);
+    assert_eq!(code, 0, "{err}");
+    let img = image::open(&path).unwrap().to_rgb8();
+    assert_eq!(img.dimensions(), (96, 96));
+    // Not blank: the table and the robot give many distinct colours.
+    let mut colours: Vec<[u8; 3]> = img.pixels().map(|p| p.0).collect();
+    colours.sort();
+    colours.dedup();
+    assert!(colours.len() > 50, "{} colours", colours.len());
+    assert!(!path.with_extension("png.tmp").exists());
+}
+
+#[test]
+fn unknown_camera_is_exit_2_with_the_camera_list() {
+    let path = tmp("nope.png");
+    let (code, _, err) = sim(&[
+        "render",
+        "--out",
+        path.to_str().unwrap(),
+        "--camera",
+        "nope",
+    ]);
+    assert_eq!(code, 2, "{err}");
+    assert!(
+        err.contains("unknown camera 'nope'") && err.contains("agentview"),
+        "{err}"
+    );
+    assert!(!err.contains("panicked"), "{err}");
+    assert!(!path.exists());
+}
+
+#[test]
+fn bad_size_is_exit_2() {
+    for size in ["0", "5000"] {
+        let (code, _, err) = sim(&[
+            "render",
+            "--out",
+            tmp("s.png").to_str().unwrap(),
+            "--size",
+            size,
+        ]);
+        assert_eq!(code, 2, "{err}");
+        assert!(err.contains("--size"), "{err}");
+    }
+    let (code, _, err) = sim(&[
+        "render",
+        "--out",
+        tmp("s.png").to_str().unwrap(),
+        "--size",
+        "abc",
+    ]);
+    assert_eq!(code, 2, "{err}");
+}
+
+#[test]
+fn unreadable_or_malformed_mjcf_is_exit_2_with_the_file_name() {
+    let (code, _, err) = sim(&[
+        "render",
+        "--out",
+        tmp("m.png").to_str().unwrap(),
+        "--mjcf",
+        "/nonexistent/scene.xml",
+    ]);
+    assert_eq!(code, 2, "{err}");
+    assert!(err.contains("/nonexistent/scene.xml"), "{err}");
+    let bad = tmp("bad.xml");
+    std::fs::write(&bad, "<mujoco><worldbody><body></mujoco>").unwrap();
+    let (code, _, err) = sim(&[
+        "render",
+        "--out",
+        tmp("m.png").to_str().unwrap(),
+        "--mjcf",
+        bad.to_str().unwrap(),
+    ]);
+    assert_eq!(code, 2, "{err}");
+    assert!(err.contains("bad.xml") && err.contains("MuJoCo"), "{err}");
+    assert!(!err.contains("panicked"), "{err}");
+}
+
+#[test]
+fn render_of_a_user_mjcf_file() {
+    let xml = tmp("user.xml");
+    std::fs::write(
+        &xml,
+        r#"<mujoco><worldbody><light pos="0 0 3"/><geom type="sphere" size="0.3" rgba="0 1 0 1"/>
+<camera name="cam" pos="0 0 2"/></worldbody></mujoco>"#,
+    )
+    .unwrap();
+    let out = tmp("user.png");
+    let (code, _, err) = sim(&[
+        "render",
+        "--out",
+        out.to_str().unwrap(),
+        "--mjcf",
+        xml.to_str().unwrap(),
+        "--camera",
+        "cam",
+        "--size",
+        "32",
+    ]);
+    assert_eq!(code, 0, "{err}");
+    let img = image::open(&out).unwrap().to_rgb8();
+    let centre = img.get_pixel(16, 16).0;
+    assert!(centre[1] > 100 && centre[0] < 80, "{centre:?}");
+}
+
+#[test]
+fn missing_output_folder_is_exit_2() {
+    let (code, _, err) = sim(&["render", "--out", "/nonexistent-dir/x.png"]);
+    assert_eq!(code, 2, "{err}");
+    assert!(err.contains("/nonexistent-dir"), "{err}");
+}
+
+#[test]
+fn bench_json_has_every_figure() {
+    let (code, out, err) = sim(&["bench", "--json", "--steps", "10", "--rounds", "1"]);
+    assert_eq!(code, 0, "{err}");
+    let v: serde_json::Value = serde_json::from_str(out.trim()).unwrap();
+    for key in [
+        "physics_steps_per_s",
+        "render_fps_128",
+        "env_steps_per_s",
+        "raw_loop_steps_per_s",
+        "env_over_raw",
+    ] {
+        let x = v[key]
+            .as_f64()
+            .unwrap_or_else(|| panic!("{key} missing in {out}"));
+        assert!(x > 0.0 && x.is_finite(), "{key} = {x}");
+    }
+}
