@@ -13,10 +13,13 @@ use rand_chacha::ChaCha8Rng;
 
 use crate::controller::{GripperRamp, OscPose, quat_to_axis_angle};
 use crate::mujoco::{Data, MjError, Model, ObjType};
+use crate::predicates::Predicates;
+use crate::render::Decor;
 use crate::render::{Channels, RenderError, RenderQuality, Renderer};
 use crate::robot::{
     BASE_POS, ENV_CONAFFINITY, ENV_CONTYPE, INIT_FINGERS, INIT_QPOS, PandaIds, panda_xml,
 };
+use crate::scene::{Scene, SceneError};
 
 /// Physics substeps per control step (0.05 s / 0.002 s).
 pub const SUBSTEPS: usize = 25;
@@ -39,9 +42,12 @@ pub enum EnvError {
     /// The action is not 7 finite numbers.
     #[error("invalid action: {0}")]
     Action(String),
-    /// The configuration is invalid.
+    /// The configuration is invalid, or no valid start could be drawn.
     #[error("invalid environment config: {0}")]
     Config(String),
+    /// The task scene could not be composed or placed.
+    #[error(transparent)]
+    Scene(#[from] SceneError),
 }
 
 /// Environment settings.
@@ -60,6 +66,10 @@ pub struct EnvConfig {
     pub quality: RenderQuality,
     /// Standard deviation of Gaussian noise on the arm joints at reset (rad); LIBERO's eval uses 0.
     pub init_noise: f64,
+    /// Idle control steps after placing a task scene (LIBERO-Mem's evaluation settles for 20).
+    pub settle_steps: usize,
+    /// The idle action used while settling (OpenVLA's: gripper opening, arm still).
+    pub settle_action: [f32; 7],
 }
 
 impl Default for EnvConfig {
@@ -71,9 +81,14 @@ impl Default for EnvConfig {
             segmentation: false,
             quality: RenderQuality::default(),
             init_noise: 0.0,
+            settle_steps: 20,
+            settle_action: [0.0, 0.0, 0.0, 0.0, 0.0, 0.0, -1.0],
         }
     }
 }
+
+/// Largest contact penetration accepted in a settled start (m).
+pub const MAX_PENETRATION: f64 = 0.004;
 
 /// What the policy sees after `reset` or `step`. Images are upright (row 0 = top), `[H, W, 3]` row-major.
 #[derive(Debug, Clone, PartialEq)]
@@ -158,7 +173,15 @@ pub fn minimal_scene_xml() -> String {
     x
 }
 
-/// The minimal environment.
+/// What the environment simulates besides the robot.
+enum World {
+    /// The minimal scene: one free box (qpos address of its free joint).
+    Minimal { cube_qpos: usize },
+    /// A task scene composed from BDDL.
+    Task(Box<Scene>),
+}
+
+/// The environment: LIBERO's control loop over the minimal scene or a task scene.
 pub struct Env {
     model: Arc<Model>,
     data: Data,
@@ -168,13 +191,27 @@ pub struct Env {
     gripper: GripperRamp,
     cfg: EnvConfig,
     steps: usize,
-    cube_qpos: usize,
+    world: World,
     cams: [usize; 2],
+    burners: Vec<(usize, usize)>,
 }
 
 impl Env {
-    /// Builds the scene, the renderer (if enabled) and the controller. Call [`Env::reset`] before stepping.
+    /// The minimal scene (table, robot, one box). Call [`Env::reset`] before stepping.
     pub fn new(cfg: EnvConfig) -> Result<Env, EnvError> {
+        let model = Arc::new(Model::from_xml_str(&minimal_scene_xml())?);
+        let cube_joint = model.require(ObjType::Joint, "cube_joint")?;
+        let cube_qpos = model.joint_qpos_adr(cube_joint);
+        Self::build(model, World::Minimal { cube_qpos }, cfg)
+    }
+
+    /// A task scene (see [`Scene::build`]). `reset` samples a valid initial state and settles it.
+    pub fn with_scene(scene: Scene, cfg: EnvConfig) -> Result<Env, EnvError> {
+        let model = scene.model.clone();
+        Self::build(model, World::Task(Box::new(scene)), cfg)
+    }
+
+    fn build(model: Arc<Model>, world: World, cfg: EnvConfig) -> Result<Env, EnvError> {
         if cfg.render && (cfg.image_size == 0 || cfg.image_size > 4096) {
             return Err(EnvError::Config(format!(
                 "image_size must be 1..=4096, got {}",
@@ -187,10 +224,7 @@ impl Env {
                 cfg.init_noise
             )));
         }
-        let model = Arc::new(Model::from_xml_str(&minimal_scene_xml())?);
         let ids = PandaIds::find(&model)?;
-        let cube_joint = model.require(ObjType::Joint, "cube_joint")?;
-        let cube_qpos = model.joint_qpos_adr(cube_joint);
         let mut data = Data::new(model.clone())?;
         data.forward()?;
         let renderer = if cfg.render {
@@ -207,6 +241,21 @@ impl Env {
             model.require(ObjType::Camera, AGENTVIEW)?,
             model.require(ObjType::Camera, EYE_IN_HAND)?,
         ];
+        // Stoves glow when on (LIBERO's `_post_process`): (burner site, instance index).
+        let burners = match &world {
+            World::Task(scene) => scene
+                .instances
+                .iter()
+                .enumerate()
+                .filter(|(_, i)| i.def.category == "flat_stove")
+                .filter_map(|(k, i)| {
+                    model
+                        .id(ObjType::Site, &format!("{}_burner", i.name))
+                        .map(|s| (s, k))
+                })
+                .collect(),
+            World::Minimal { .. } => Vec::new(),
+        };
         let osc = OscPose::new(ids.clone(), &data);
         Ok(Env {
             model,
@@ -217,9 +266,23 @@ impl Env {
             gripper: GripperRamp::default(),
             cfg,
             steps: 0,
-            cube_qpos,
+            world,
             cams,
+            burners,
         })
+    }
+
+    /// The task scene, if this is a task environment.
+    pub fn scene(&self) -> Option<&Scene> {
+        match &self.world {
+            World::Task(s) => Some(s),
+            World::Minimal { .. } => None,
+        }
+    }
+
+    /// Predicates on the current state (task environments).
+    pub fn predicates(&self) -> Option<Predicates<'_>> {
+        self.scene().map(|s| Predicates::new(s, &self.data))
     }
 
     /// The compiled model.
@@ -247,45 +310,95 @@ impl Env {
         self.renderer.as_mut().map(|r| (r, &mut self.data))
     }
 
-    /// Resets to LIBERO's initial arm configuration with the box placed from `seed`, and observes.
+    /// Resets from `seed` and observes. The minimal scene places the box; a task scene samples LIBERO's
+    /// placement, settles it with `settle_steps` idle steps, and redraws (continuing the same seeded stream)
+    /// until every `:init` relation holds and nothing interpenetrates.
     pub fn reset(&mut self, seed: u64) -> Result<Observation, EnvError> {
         let mut rng = ChaCha8Rng::seed_from_u64(seed);
-        self.data.reset();
-        let noise = self.cfg.init_noise;
-        {
-            let qpos = self.data.qpos_mut();
-            for i in 0..7 {
-                let n = if noise > 0.0 {
-                    gaussian(&mut rng) * noise
-                } else {
-                    0.0
-                };
-                qpos[self.ids.arm_qpos[i]] = INIT_QPOS[i] + n;
+        const ATTEMPTS: usize = 20;
+        let mut last_problem = String::new();
+        for _ in 0..ATTEMPTS {
+            self.data.reset();
+            self.place_robot(&mut rng);
+            match &self.world {
+                World::Minimal { cube_qpos } => {
+                    let c = *cube_qpos;
+                    let x = rng.random_range(-0.10..0.10);
+                    let y = rng.random_range(-0.15..0.15);
+                    let yaw: f64 = rng.random_range(0.0..std::f64::consts::TAU);
+                    self.data.qpos_mut()[c..c + 7].copy_from_slice(&[
+                        x,
+                        y,
+                        0.92,
+                        (yaw / 2.0).cos(),
+                        0.0,
+                        0.0,
+                        (yaw / 2.0).sin(),
+                    ]);
+                }
+                World::Task(scene) => scene.sample_init(&mut self.data, &mut rng)?,
             }
-            qpos[self.ids.finger_qpos[0]] = INIT_FINGERS[0];
-            qpos[self.ids.finger_qpos[1]] = INIT_FINGERS[1];
-            let x = rng.random_range(-0.10..0.10);
-            let y = rng.random_range(-0.15..0.15);
-            let yaw: f64 = rng.random_range(0.0..std::f64::consts::TAU);
-            let c = self.cube_qpos;
-            qpos[c..c + 7].copy_from_slice(&[
-                x,
-                y,
-                0.92,
-                (yaw / 2.0).cos(),
-                0.0,
-                0.0,
-                (yaw / 2.0).sin(),
-            ]);
+            self.data.qvel_mut().fill(0.0);
+            self.data.ctrl_mut().fill(0.0);
+            self.data.forward()?;
+            // robosuite re-creates the controller at reset: goal = current pose, posture = current arm qpos.
+            self.osc = OscPose::new(self.ids.clone(), &self.data);
+            self.gripper = GripperRamp::default();
+            if let World::Task(_) = self.world {
+                for _ in 0..self.cfg.settle_steps {
+                    self.step_physics(&self.cfg.settle_action.clone())?;
+                }
+                if let Some(p) = self.start_problem() {
+                    last_problem = p;
+                    continue;
+                }
+            }
+            self.steps = 0;
+            return self.observe();
         }
-        self.data.qvel_mut().fill(0.0);
-        self.data.ctrl_mut().fill(0.0);
-        self.data.forward()?;
-        // robosuite re-creates the controller at reset: goal = current pose, posture = current arm qpos.
-        self.osc = OscPose::new(self.ids.clone(), &self.data);
-        self.gripper = GripperRamp::default();
-        self.steps = 0;
-        self.observe()
+        Err(EnvError::Config(format!(
+            "no valid initial state after {ATTEMPTS} draws from seed {seed}: {last_problem}"
+        )))
+    }
+
+    /// Why the settled start is invalid (an `:init` relation false, or interpenetration), if it is.
+    fn start_problem(&self) -> Option<String> {
+        let scene = self.scene()?;
+        let p = Predicates::new(scene, &self.data);
+        for atom in &scene.spec.init {
+            match p.eval(&atom.predicate, &atom.args) {
+                Ok(true) => {}
+                Ok(false) => return Some(format!("({atom}) is false after settling")),
+                Err(e) => return Some(format!("({atom}): {e}")),
+            }
+        }
+        for c in self.data.contacts() {
+            if c.dist < -MAX_PENETRATION {
+                return Some(format!(
+                    "geoms {} and {} interpenetrate by {:.1} mm",
+                    self.model.name(ObjType::Geom, c.geom1).unwrap_or("?"),
+                    self.model.name(ObjType::Geom, c.geom2).unwrap_or("?"),
+                    -c.dist * 1e3
+                ));
+            }
+        }
+        None
+    }
+
+    fn place_robot(&mut self, rng: &mut ChaCha8Rng) {
+        let noise = self.cfg.init_noise;
+        let ids = &self.ids;
+        let qpos = self.data.qpos_mut();
+        for i in 0..7 {
+            let n = if noise > 0.0 {
+                gaussian(rng) * noise
+            } else {
+                0.0
+            };
+            qpos[ids.arm_qpos[i]] = INIT_QPOS[i] + n;
+        }
+        qpos[ids.finger_qpos[0]] = INIT_FINGERS[0];
+        qpos[ids.finger_qpos[1]] = INIT_FINGERS[1];
     }
 
     /// Applies one 7-D action `[dx, dy, dz, dax, day, daz, gripper]` in [−1, 1] for one control step.
@@ -364,6 +477,26 @@ impl Env {
             eef_quat,
         };
         if let Some(r) = self.renderer.as_mut() {
+            if let World::Task(scene) = &self.world {
+                let q = self.data.qpos();
+                let decor = self
+                    .burners
+                    .iter()
+                    .filter(|&&(_, k)| {
+                        scene.instances[k]
+                            .joints
+                            .iter()
+                            .any(|&(_, a, art)| art.turn_on(q[a]))
+                    })
+                    .map(|&(site, _)| Decor {
+                        pos: self.data.site_pos(site),
+                        mat: self.data.site_mat(site),
+                        size: [0.0625, 0.0005],
+                        rgba: [1.0, 0.15, 0.05, 1.0],
+                    })
+                    .collect();
+                r.set_decor(decor);
+            }
             let s = self.cfg.image_size;
             let ch = Channels {
                 rgb: true,
@@ -399,10 +532,15 @@ impl Env {
         Ok(obs)
     }
 
-    /// World position of the box.
-    pub fn cube_pos(&self) -> [f64; 3] {
-        let q = &self.data.qpos()[self.cube_qpos..self.cube_qpos + 3];
-        [q[0], q[1], q[2]]
+    /// World position of the box (minimal scene only).
+    pub fn cube_pos(&self) -> Option<[f64; 3]> {
+        match self.world {
+            World::Minimal { cube_qpos: c } => {
+                let q = &self.data.qpos()[c..c + 3];
+                Some([q[0], q[1], q[2]])
+            }
+            World::Task(_) => None,
+        }
     }
 }
 

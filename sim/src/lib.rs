@@ -12,4 +12,7 @@ pub mod render;
 pub mod robot;
 
 pub use env::{Env, EnvConfig, EnvError, Observation};
+pub mod assets;
 pub mod bench;
+pub mod predicates;
+pub mod scene;

@@ -381,8 +381,22 @@ pub struct Frame {
     pub segmentation: Option<Vec<i32>>,
 }
 
+/// A visual-only cylinder added to every rendered frame (e.g. a stove burner's glow), world frame.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Decor {
+    /// Centre.
+    pub pos: [f64; 3],
+    /// Orientation, row-major 3×3.
+    pub mat: [f64; 9],
+    /// Radius and half-height.
+    pub size: [f64; 2],
+    /// Colour.
+    pub rgba: [f32; 4],
+}
+
 /// Renders named cameras of one model into CPU buffers.
 pub struct Renderer {
+    decor: Vec<Decor>,
     gl: GlContext,
     scene: Box<ffi::mjvScene>,
     context: Box<ffi::mjrContext>,
@@ -473,6 +487,7 @@ impl Renderer {
         let extent = model.extent();
         let vis = &model.raw().vis.map;
         let mut r = Renderer {
+            decor: Vec::new(),
             gl,
             scene,
             context,
@@ -511,6 +526,11 @@ impl Renderer {
         if let Some(g) = self.option.geomgroup.get_mut(group) {
             *g = visible as u8;
         }
+    }
+
+    /// Replaces the decorations drawn in every following frame (not in segmentation).
+    pub fn set_decor(&mut self, decor: Vec<Decor>) {
+        self.decor = decor;
     }
 
     /// The quality settings in use.
@@ -598,6 +618,27 @@ impl Renderer {
             height,
             ..Frame::default()
         };
+        let base_ngeom = self.scene.ngeom;
+        for d in &self.decor {
+            if self.scene.ngeom >= self.scene.maxgeom {
+                break;
+            }
+            let size = [d.size[0], d.size[0], d.size[1]];
+            // SAFETY: ngeom < maxgeom, so the slot exists; mjv_initGeom fills it.
+            unsafe {
+                let g = self.scene.geoms.add(self.scene.ngeom as usize);
+                ffi::mjv_initGeom(
+                    g,
+                    ffi::mjGEOM_CYLINDER as i32,
+                    size.as_ptr(),
+                    d.pos.as_ptr(),
+                    d.mat.as_ptr(),
+                    d.rgba.as_ptr(),
+                );
+                (*g).category = ffi::mjCAT_DECOR as i32;
+            }
+            self.scene.ngeom += 1;
+        }
         if channels.rgb || channels.depth {
             let depth_ptr = if channels.depth {
                 self.depth_buf.as_mut_ptr()
@@ -628,6 +669,8 @@ impl Renderer {
                 frame.depth = Some(flip_rows(&lin, width, height, 1));
             }
         }
+        // Decorations are visual only: segmentation and later frames see the plain scene.
+        self.scene.ngeom = base_ngeom;
         if channels.segmentation {
             self.scene.flags[ffi::mjRND_SEGMENT as usize] = 1;
             self.scene.flags[ffi::mjRND_IDCOLOR as usize] = 1;

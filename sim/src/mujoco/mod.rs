@@ -489,6 +489,48 @@ impl Model {
         }
     }
 
+    /// Body that carries site `site`.
+    pub fn site_body(&self, site: usize) -> usize {
+        assert!(site < self.nsite(), "site id out of range");
+        // SAFETY: index checked.
+        unsafe { *self.raw().site_bodyid.add(site) as usize }
+    }
+
+    /// Half-sizes of site `site` (its MJCF `size`).
+    pub fn site_size(&self, site: usize) -> [f64; 3] {
+        assert!(site < self.nsite(), "site id out of range");
+        // SAFETY: index checked; three entries per site.
+        unsafe {
+            let p = self.raw().site_size.add(3 * site);
+            [*p, *p.add(1), *p.add(2)]
+        }
+    }
+
+    /// Body that carries joint `joint`.
+    pub fn joint_body(&self, joint: usize) -> usize {
+        assert!(joint < self.njnt(), "joint id out of range");
+        // SAFETY: index checked.
+        unsafe { *self.raw().jnt_bodyid.add(joint) as usize }
+    }
+
+    /// Number of joints.
+    pub fn njnt(&self) -> usize {
+        self.raw().njnt as usize
+    }
+
+    /// Mocap index of `body`, if it is a mocap body.
+    pub fn body_mocap(&self, body: usize) -> Option<usize> {
+        assert!(body < self.nbody(), "body id out of range");
+        // SAFETY: index checked.
+        let id = unsafe { *self.raw().body_mocapid.add(body) };
+        (id >= 0).then_some(id as usize)
+    }
+
+    /// Number of mocap bodies.
+    pub fn nmocap(&self) -> usize {
+        self.raw().nmocap as usize
+    }
+
     /// Vertical field of view of camera `cam` in degrees.
     pub fn camera_fovy(&self, cam: usize) -> f64 {
         assert!(cam < self.ncam(), "camera id out of range");
@@ -643,6 +685,10 @@ impl Data {
         site_xpos, site_xpos_mut, site_xpos, f64, |m: &ffi::mjModel| 3 * m.nsite as usize;
         /// Site orientations, row-major 3×3 `[nsite * 9]`.
         site_xmat, site_xmat_mut, site_xmat, f64, |m: &ffi::mjModel| 9 * m.nsite as usize;
+        /// Mocap body positions `[nmocap * 3]`.
+        mocap_pos, mocap_pos_mut, mocap_pos, f64, |m: &ffi::mjModel| 3 * m.nmocap as usize;
+        /// Mocap body orientations, wxyz `[nmocap * 4]`.
+        mocap_quat, mocap_quat_mut, mocap_quat, f64, |m: &ffi::mjModel| 4 * m.nmocap as usize;
         /// Geom positions `[ngeom * 3]`.
         geom_xpos, geom_xpos_mut, geom_xpos, f64, |m: &ffi::mjModel| 3 * m.ngeom as usize;
         /// Geom orientations, row-major 3×3 `[ngeom * 9]`.

@@ -1,0 +1,791 @@
+//! The built-in asset library: LIBERO's objects and fixtures rebuilt from primitives.
+//!
+//! Each asset is sized like LIBERO's (libero.md §3.2: collision AABB, placement offsets, masses) and exposes
+//! the same sites under the same names (`contain_region`, `top_side`, `top_region`, `cook_region`, …), so LIBERO's
+//! BDDL files work unchanged. Every element name gets the instance prefix (`plate_1_main`, `basket_1_contain_region`)
+//! exactly as robosuite does. Two instances of one category differ only in their names: visually identical
+//! objects are truly identical, which is the point of the benchmark.
+//!
+//! Fixtures are mocap bodies (welded to the world, their pose written per episode into `mocap_pos/quat`), so
+//! one compiled model serves every reset. Movable objects carry a free joint `<inst>_joint0`.
+
+use std::f64::consts::{FRAC_PI_2, PI};
+use std::fmt::Write;
+
+use crate::robot::{ENV_CONAFFINITY, ENV_CONTYPE};
+
+/// Movable object or fixture.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum AssetKind {
+    /// Free-jointed object.
+    Movable,
+    /// Welded to the world (a mocap body); may have internal joints.
+    Fixture,
+}
+
+/// How an articulated joint is judged by the `Open`/`Close`/`TurnOn`/`TurnOff` predicates (libero.md §2.3).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Articulation {
+    /// WoodenCabinet drawers: open iff q < −0.14, closed iff q > 0.
+    CabinetDrawer,
+    /// FlatStove knob: on iff q ≥ 0.5, off iff q < 0.
+    StoveKnob,
+}
+
+impl Articulation {
+    /// `is_open(q)`.
+    pub fn is_open(self, q: f64) -> bool {
+        match self {
+            Articulation::CabinetDrawer => q < -0.14,
+            Articulation::StoveKnob => q >= 0.5,
+        }
+    }
+
+    /// `is_close(q)`.
+    pub fn is_close(self, q: f64) -> bool {
+        match self {
+            Articulation::CabinetDrawer => q > 0.0,
+            Articulation::StoveKnob => q < 0.0,
+        }
+    }
+
+    /// `turn_on(q)`.
+    pub fn turn_on(self, q: f64) -> bool {
+        self.is_open(q)
+    }
+
+    /// `turn_off(q)`.
+    pub fn turn_off(self, q: f64) -> bool {
+        self.is_close(q)
+    }
+
+    /// Init sampling range for an `Open`/`Turnon` atom.
+    pub fn open_range(self) -> [f64; 2] {
+        match self {
+            Articulation::CabinetDrawer => [-0.16, -0.14],
+            Articulation::StoveKnob => [0.5, 2.1],
+        }
+    }
+
+    /// Init sampling range for a `Close`/`Turnoff` atom.
+    pub fn close_range(self) -> [f64; 2] {
+        match self {
+            Articulation::CabinetDrawer => [0.0, 0.005],
+            Articulation::StoveKnob => [-0.005, 0.0],
+        }
+    }
+}
+
+/// A region site exposed by an asset (its MJCF name before the instance prefix).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SiteDef {
+    /// Region name (`contain_region`, `top_side`, …).
+    pub name: &'static str,
+    /// Half-sizes of the box site.
+    pub half: [f64; 3],
+}
+
+/// One asset of the library.
+#[derive(Debug, Clone, PartialEq)]
+pub struct AssetDef {
+    /// BDDL category (`akita_black_bowl`, `wooden_cabinet`, …).
+    pub category: &'static str,
+    /// Movable or fixture.
+    pub kind: AssetKind,
+    /// LIBERO's `bottom_offset.z` (placement metadata, not the true geometry).
+    pub bottom_offset: f64,
+    /// LIBERO's `top_offset.z`.
+    pub top_offset: f64,
+    /// LIBERO's `horizontal_radius`.
+    pub horizontal_radius: f64,
+    /// Free-joint quaternion (wxyz) LIBERO's placement sampler writes for this category.
+    pub placement_quat: [f64; 4],
+    /// Region sites.
+    pub sites: &'static [SiteDef],
+    /// Internal joints (name without prefix) and their articulation class.
+    pub joints: &'static [(&'static str, Articulation)],
+}
+
+const YAW_HALF_PI: [f64; 4] = [
+    std::f64::consts::FRAC_1_SQRT_2,
+    0.0,
+    0.0,
+    std::f64::consts::FRAC_1_SQRT_2,
+];
+const YAW_PI: [f64; 4] = [0.0, 0.0, 0.0, 1.0];
+
+const DRAWER_REGION_HALF: [f64; 3] = [0.02993, 0.07561, 0.10224];
+
+static ASSETS: &[AssetDef] = &[
+    AssetDef {
+        category: "akita_black_bowl",
+        kind: AssetKind::Movable,
+        bottom_offset: -0.06,
+        top_offset: 0.04,
+        horizontal_radius: 0.025,
+        placement_quat: YAW_HALF_PI,
+        sites: &[],
+        joints: &[],
+    },
+    AssetDef {
+        category: "plate",
+        kind: AssetKind::Movable,
+        bottom_offset: -0.06,
+        top_offset: 0.04,
+        horizontal_radius: 0.025,
+        placement_quat: YAW_HALF_PI,
+        sites: &[],
+        joints: &[],
+    },
+    AssetDef {
+        category: "basket",
+        kind: AssetKind::Movable,
+        bottom_offset: -0.06,
+        top_offset: 0.04,
+        horizontal_radius: 0.025,
+        placement_quat: YAW_HALF_PI,
+        sites: &[SiteDef {
+            name: "contain_region",
+            half: [0.06108, 0.06108, 0.06949],
+        }],
+        joints: &[],
+    },
+    AssetDef {
+        category: "cream_cheese",
+        kind: AssetKind::Movable,
+        bottom_offset: -0.025,
+        top_offset: 0.025,
+        horizontal_radius: 0.03,
+        placement_quat: YAW_PI,
+        sites: &[],
+        joints: &[],
+    },
+    AssetDef {
+        category: "wine_bottle",
+        kind: AssetKind::Movable,
+        bottom_offset: -0.06,
+        top_offset: 0.04,
+        horizontal_radius: 0.025,
+        placement_quat: YAW_PI,
+        sites: &[],
+        joints: &[],
+    },
+    AssetDef {
+        category: "wine_rack",
+        kind: AssetKind::Fixture,
+        bottom_offset: -0.06,
+        top_offset: 0.04,
+        horizontal_radius: 0.025,
+        placement_quat: [1.0, 0.0, 0.0, 0.0],
+        sites: &[SiteDef {
+            name: "top_region",
+            half: [0.10087, 0.022, 0.00251],
+        }],
+        joints: &[],
+    },
+    AssetDef {
+        category: "flat_stove",
+        kind: AssetKind::Fixture,
+        bottom_offset: -0.045,
+        top_offset: 0.045,
+        horizontal_radius: 0.045,
+        placement_quat: [1.0, 0.0, 0.0, 0.0],
+        sites: &[SiteDef {
+            name: "cook_region",
+            half: [0.075, 0.075, 0.0025],
+        }],
+        joints: &[("button", Articulation::StoveKnob)],
+    },
+    AssetDef {
+        category: "wooden_cabinet",
+        kind: AssetKind::Fixture,
+        bottom_offset: -0.045,
+        top_offset: 0.045,
+        horizontal_radius: 0.045,
+        placement_quat: [1.0, 0.0, 0.0, 0.0],
+        sites: &[
+            SiteDef {
+                name: "top_side",
+                half: [0.12534, 0.09438, 0.00147],
+            },
+            SiteDef {
+                name: "top_region",
+                half: DRAWER_REGION_HALF,
+            },
+            SiteDef {
+                name: "middle_region",
+                half: DRAWER_REGION_HALF,
+            },
+            SiteDef {
+                name: "bottom_region",
+                half: DRAWER_REGION_HALF,
+            },
+        ],
+        joints: &[
+            ("top_level", Articulation::CabinetDrawer),
+            ("middle_level", Articulation::CabinetDrawer),
+            ("bottom_level", Articulation::CabinetDrawer),
+        ],
+    },
+];
+
+/// Looks up a category of the library.
+pub fn asset(category: &str) -> Option<&'static AssetDef> {
+    ASSETS.iter().find(|a| a.category == category)
+}
+
+/// Every category the library provides (objects and fixtures; tables come with the arena).
+pub fn categories() -> Vec<&'static str> {
+    ASSETS.iter().map(|a| a.category).collect()
+}
+
+/// Workspace categories provided by the arena itself (`table` → `main_table`, `kitchen_table`).
+pub const WORKSPACE_CATEGORIES: &[&str] = &["table", "kitchen_table"];
+
+// --- geometry helpers -----------------------------------------------------------------------------
+
+fn qmul(a: [f64; 4], b: [f64; 4]) -> [f64; 4] {
+    [
+        a[0] * b[0] - a[1] * b[1] - a[2] * b[2] - a[3] * b[3],
+        a[0] * b[1] + a[1] * b[0] + a[2] * b[3] - a[3] * b[2],
+        a[0] * b[2] - a[1] * b[3] + a[2] * b[0] + a[3] * b[1],
+        a[0] * b[3] + a[1] * b[2] - a[2] * b[1] + a[3] * b[0],
+    ]
+}
+
+fn qz(a: f64) -> [f64; 4] {
+    [(a / 2.0).cos(), 0.0, 0.0, (a / 2.0).sin()]
+}
+
+fn qy(a: f64) -> [f64; 4] {
+    [(a / 2.0).cos(), 0.0, (a / 2.0).sin(), 0.0]
+}
+
+fn qx(a: f64) -> [f64; 4] {
+    [(a / 2.0).cos(), (a / 2.0).sin(), 0.0, 0.0]
+}
+
+fn f(v: f64) -> String {
+    let s = format!("{v:.6}");
+    let s = s.trim_end_matches('0').trim_end_matches('.');
+    if s == "-0" { "0".into() } else { s.to_string() }
+}
+
+fn v3(v: [f64; 3]) -> String {
+    format!("{} {} {}", f(v[0]), f(v[1]), f(v[2]))
+}
+
+fn v4(v: [f64; 4]) -> String {
+    format!("{} {} {} {}", f(v[0]), f(v[1]), f(v[2]), f(v[3]))
+}
+
+/// Writes geoms into an MJCF body. All geoms of an asset collide with the robot and each other.
+struct Geoms<'a> {
+    out: &'a mut String,
+    prefix: &'a str,
+    n: usize,
+    rgba: [f64; 4],
+    friction: &'static str,
+    /// Extra attributes (solref/solimp) shared by the asset's geoms.
+    contact: &'static str,
+}
+
+impl Geoms<'_> {
+    fn geom(&mut self, kind: &str, pos: [f64; 3], quat: [f64; 4], size: &str, mass: f64) {
+        let _ = writeln!(
+            self.out,
+            r#"<geom name="{p}_g{n}" type="{kind}" pos="{}" quat="{}" size="{size}" mass="{}" rgba="{}" friction="{}" contype="{ct}" conaffinity="{ca}" group="1" {}/>"#,
+            v3(pos),
+            v4(quat),
+            f(mass),
+            v4(self.rgba),
+            self.friction,
+            self.contact,
+            p = self.prefix,
+            n = self.n,
+            ct = ENV_CONTYPE,
+            ca = ENV_CONAFFINITY,
+        );
+        self.n += 1;
+    }
+
+    fn bx(&mut self, pos: [f64; 3], half: [f64; 3], mass: f64) {
+        self.geom("box", pos, [1.0, 0.0, 0.0, 0.0], &v3(half), mass);
+    }
+
+    fn bx_rot(&mut self, pos: [f64; 3], quat: [f64; 4], half: [f64; 3], mass: f64) {
+        self.geom("box", pos, quat, &v3(half), mass);
+    }
+
+    fn cyl(&mut self, pos: [f64; 3], radius: f64, half_height: f64, mass: f64) {
+        self.geom(
+            "cylinder",
+            pos,
+            [1.0, 0.0, 0.0, 0.0],
+            &format!("{} {}", f(radius), f(half_height)),
+            mass,
+        );
+    }
+
+    /// A ring of `n` boxes forming a (possibly flared) wall from radius `r0` at `z0` to `r1` at `z1`.
+    #[allow(clippy::too_many_arguments)]
+    fn ring(&mut self, n: usize, r0: f64, r1: f64, z0: f64, z1: f64, thickness: f64, mass: f64) {
+        let tilt = (r1 - r0).atan2(z1 - z0);
+        let slant = ((r1 - r0).powi(2) + (z1 - z0).powi(2)).sqrt();
+        let rm = 0.5 * (r0 + r1);
+        let zm = 0.5 * (z0 + z1);
+        // Tangential half-width: a little overlap so the wall has no gaps.
+        let half_w = (PI / n as f64).tan() * (rm + thickness / 2.0) * 1.08;
+        for i in 0..n {
+            let th = 2.0 * PI * i as f64 / n as f64;
+            let q = qmul(qz(th), qy(tilt));
+            self.bx_rot(
+                [rm * th.cos(), rm * th.sin(), zm],
+                q,
+                [thickness / 2.0, half_w, slant / 2.0],
+                mass / n as f64,
+            );
+        }
+    }
+}
+
+fn site(out: &mut String, prefix: &str, name: &str, pos: [f64; 3], quat: [f64; 4], half: [f64; 3]) {
+    let _ = writeln!(
+        out,
+        r#"<site name="{prefix}_{name}" type="box" pos="{}" quat="{}" size="{}" rgba="0 0 1 0" group="3"/>"#,
+        v3(pos),
+        v4(quat),
+        v3(half)
+    );
+}
+
+/// LIBERO's collision-geom contact parameters (solref 0.001 is clamped to 2·dt by MuJoCo's refsafe).
+const OBJ_CONTACT: &str = r#"solref="0.004 1" solimp="0.998 0.998 0.001""#;
+const OBJ_FRICTION: &str = "0.95 0.3 0.1";
+
+/// MJCF body tree for one instance of `def`, named `<instance>_main`, at `pos`/`quat` (world frame).
+pub fn instance_xml(def: &AssetDef, instance: &str, pos: [f64; 3], quat: [f64; 4]) -> String {
+    let mut out = String::new();
+    let p = instance;
+    let head = match def.kind {
+        AssetKind::Movable => format!(
+            r#"<body name="{p}_main" pos="{}" quat="{}">
+<freejoint name="{p}_joint0"/>
+"#,
+            v3(pos),
+            v4(quat)
+        ),
+        AssetKind::Fixture => format!(
+            r#"<body name="{p}_main" pos="{}" quat="{}" mocap="true">
+"#,
+            v3(pos),
+            v4(quat)
+        ),
+    };
+    out.push_str(&head);
+    match def.category {
+        "akita_black_bowl" => bowl(&mut out, p),
+        "plate" => plate(&mut out, p),
+        "basket" => basket(&mut out, p),
+        "cream_cheese" => cream_cheese(&mut out, p),
+        "wine_bottle" => wine_bottle(&mut out, p),
+        "wine_rack" => wine_rack(&mut out, p),
+        "flat_stove" => flat_stove(&mut out, p),
+        "wooden_cabinet" => wooden_cabinet(&mut out, p),
+        other => unreachable!("asset {other} listed without geometry"),
+    }
+    out.push_str("</body>\n");
+    out
+}
+
+fn geoms<'a>(out: &'a mut String, prefix: &'a str, rgba: [f64; 4]) -> Geoms<'a> {
+    Geoms {
+        out,
+        prefix,
+        n: 0,
+        rgba,
+        friction: OBJ_FRICTION,
+        contact: OBJ_CONTACT,
+    }
+}
+
+/// Akita black bowl: Ø 0.107 m, 0.05 m tall, origin at the bottom centre, thin flared wall with a rim.
+fn bowl(out: &mut String, p: &str) {
+    let mut g = geoms(out, p, [0.06, 0.06, 0.065, 1.0]);
+    g.cyl([0.0, 0.0, 0.005], 0.036, 0.003, 0.0016);
+    g.ring(16, 0.036, 0.0505, 0.004, 0.050, 0.005, 0.0035);
+    // Rim: a thin lip that fingers can pinch.
+    g.ring(16, 0.0505, 0.0535, 0.048, 0.052, 0.004, 0.0005);
+}
+
+/// Plate: Ø 0.138 m, 0.019 m tall, flat centre and a low rim.
+fn plate(out: &mut String, p: &str) {
+    let mut g = geoms(out, p, [0.92, 0.92, 0.88, 1.0]);
+    g.cyl([0.0, 0.0, 0.0015], 0.052, 0.004, 0.007);
+    g.ring(16, 0.052, 0.069, 0.0, 0.0164, 0.004, 0.0045);
+}
+
+/// Basket: 0.17 × 0.157 × 0.141 m, open top, thin walls whose upper edge is a graspable rim.
+fn basket(out: &mut String, p: &str) {
+    let (hx, hy, top, t) = (0.085, 0.0785, 0.1457, 0.006);
+    {
+        let mut g = geoms(out, p, [0.62, 0.45, 0.25, 1.0]);
+        g.bx([0.0, 0.0, 0.0042 + 0.004], [hx, hy, 0.004], 0.04);
+        let zc = (0.0042 + top) / 2.0;
+        let hz = (top - 0.0042) / 2.0;
+        g.bx([hx - t / 2.0, 0.0, zc], [t / 2.0, hy, hz], 0.024);
+        g.bx([-hx + t / 2.0, 0.0, zc], [t / 2.0, hy, hz], 0.024);
+        g.bx([0.0, hy - t / 2.0, zc], [hx - t, t / 2.0, hz], 0.024);
+        g.bx([0.0, -hy + t / 2.0, zc], [hx - t, t / 2.0, hz], 0.024);
+    }
+    site(
+        out,
+        p,
+        "contain_region",
+        [0.0, 0.0, 0.07185],
+        [0.0, 0.0, 0.0, 1.0],
+        [0.06108, 0.06108, 0.06949],
+    );
+}
+
+/// Cream cheese box: 0.081 × 0.043 × 0.018 m, centred on its origin.
+fn cream_cheese(out: &mut String, p: &str) {
+    let mut g = geoms(out, p, [0.82, 0.84, 0.9, 1.0]);
+    g.bx([0.0, 0.0, 0.0], [0.0405, 0.0215, 0.009], 0.0062);
+    let mut lid = geoms(g.out, p, [0.25, 0.35, 0.75, 1.0]);
+    lid.n = 1;
+    lid.geom(
+        "box",
+        [0.0, 0.0, 0.0091],
+        [1.0, 0.0, 0.0, 0.0],
+        "0.03 0.015 0.0002",
+        0.0,
+    );
+}
+
+/// Wine bottle: Ø 0.043 m, 0.157 m tall, upright, origin at the bottom.
+fn wine_bottle(out: &mut String, p: &str) {
+    let mut g = geoms(out, p, [0.12, 0.28, 0.14, 1.0]);
+    g.cyl([0.0, 0.0, 0.053], 0.0215, 0.052, 0.011);
+    g.cyl([0.0, 0.0, 0.1125], 0.015, 0.0075, 0.002);
+    g.cyl([0.0, 0.0, 0.139], 0.009, 0.019, 0.0015);
+    let mut cap = geoms(g.out, p, [0.55, 0.1, 0.12, 1.0]);
+    cap.n = 3;
+    cap.cyl([0.0, 0.0, 0.1545], 0.0095, 0.0035, 0.0005);
+}
+
+/// Wine rack: 0.269 × 0.254 × 0.33 m frame with a cradle tilted −62.5° about x holding a lying bottle.
+fn wine_rack(out: &mut String, p: &str) {
+    let q_site = [0.8549119, -0.5187733, 0.0, 0.0];
+    let site_pos = [0.0, -0.08003, 0.21745];
+    {
+        let mut g = geoms(out, p, [0.45, 0.30, 0.18, 1.0]);
+        // Base and two side frames.
+        g.bx([0.0, 0.0, 0.004], [0.1345, 0.127, 0.006], 0.05);
+        g.bx([0.128, 0.0, 0.165], [0.0065, 0.127, 0.004], 0.02);
+        g.bx([-0.128, 0.0, 0.165], [0.0065, 0.127, 0.004], 0.02);
+        for &x in &[0.128, -0.128] {
+            g.bx([x, 0.115, 0.165], [0.0065, 0.006, 0.163], 0.01);
+            g.bx([x, -0.115, 0.11], [0.0065, 0.006, 0.108], 0.01);
+        }
+        // The cradle: a plate just below the region site, plus a lip along its lower edge.
+        let below = qrot(q_site, [0.0, 0.0, -0.006]);
+        g.bx_rot(
+            [
+                site_pos[0] + below[0],
+                site_pos[1] + below[1],
+                site_pos[2] + below[2],
+            ],
+            q_site,
+            [0.1345, 0.05, 0.0035],
+            0.02,
+        );
+        let lip = qrot(q_site, [0.0, -0.05, 0.012]);
+        g.bx_rot(
+            [
+                site_pos[0] + lip[0],
+                site_pos[1] + lip[1],
+                site_pos[2] + lip[2],
+            ],
+            q_site,
+            [0.1345, 0.004, 0.015],
+            0.005,
+        );
+        // Cross bars holding the cradle.
+        g.bx([0.0, 0.115, 0.32], [0.128, 0.006, 0.006], 0.01);
+        g.bx([0.0, -0.115, 0.2], [0.128, 0.006, 0.006], 0.01);
+    }
+    site(
+        out,
+        p,
+        "top_region",
+        site_pos,
+        q_site,
+        [0.10087, 0.022, 0.00251],
+    );
+}
+
+fn qrot(q: [f64; 4], v: [f64; 3]) -> [f64; 3] {
+    let r = qmul(
+        qmul(q, [0.0, v[0], v[1], v[2]]),
+        [q[0], -q[1], -q[2], -q[3]],
+    );
+    [r[1], r[2], r[3]]
+}
+
+/// Flat stove: 0.297 × 0.19 × 0.07 m; knob (hinge `button`, axis z) at the origin, burner at +0.15 x.
+fn flat_stove(out: &mut String, p: &str) {
+    {
+        let mut g = geoms(out, p, [0.2, 0.2, 0.22, 1.0]);
+        g.friction = "1 0.005 0.0001";
+        g.contact = r#"solref="0.02 1""#;
+        // Cook top slab and burner plate (the cook region sits on its surface).
+        g.bx([0.1475, 0.0, -0.009], [0.0975, 0.095, 0.009], 1.0);
+        g.cyl([0.15, 0.0, -0.0015], 0.07, 0.0015, 0.3);
+        // Control box under the knob.
+        g.bx([-0.001, 0.0, 0.01], [0.051, 0.06, 0.028], 0.2);
+    }
+    site(
+        out,
+        p,
+        "cook_region",
+        [0.15, 0.0, 0.0],
+        [1.0, 0.0, 0.0, 0.0],
+        [0.075, 0.075, 0.0025],
+    );
+    let _ = writeln!(
+        out,
+        r#"<site name="{p}_burner" type="cylinder" pos="0.15 0 0.022" size="0.0625 0.0005" rgba="1 0.15 0.05 0" group="1"/>"#
+    );
+    let _ = writeln!(
+        out,
+        r#"<body name="{p}_knob" pos="0 0 0.038">
+<inertial pos="0 0 0.01" mass="3" diaginertia="1 1 1"/>
+<joint name="{p}_button" type="hinge" axis="0 0 1" range="-0.005 2.1" limited="true" damping="1"/>"#
+    );
+    {
+        let mut g = geoms(out, p, [0.85, 0.85, 0.87, 1.0]);
+        g.n = 10;
+        g.friction = "1 0.005 0.0001";
+        g.contact = r#"solref="0.02 1""#;
+        g.cyl([0.0, 0.0, 0.008], 0.022, 0.008, 0.0);
+        // Pointer bar: what the gripper pushes to turn the knob.
+        g.bx([0.0, 0.0, 0.024], [0.004, 0.02, 0.008], 0.0);
+    }
+    out.push_str("</body>\n");
+}
+
+/// Wooden cabinet: 0.255 × 0.221 × 0.218 m carcass with three drawers sliding along local −y (range
+/// [−0.16, 0.01]), each with a handle; `top_side` on the carcass top, one `*_region` inside each drawer.
+fn wooden_cabinet(out: &mut String, p: &str) {
+    let wood = [0.55, 0.36, 0.2, 1.0];
+    let (hx, y_back, y_front, z0, z1, t) = (0.1275, 0.126, -0.095, 0.005, 0.223, 0.008);
+    let yc = 0.5 * (y_back + y_front);
+    let hy = 0.5 * (y_back - y_front);
+    {
+        let mut g = geoms(out, p, wood);
+        g.bx(
+            [hx - t / 2.0, yc, (z0 + z1) / 2.0],
+            [t / 2.0, hy, (z1 - z0) / 2.0],
+            0.03,
+        );
+        g.bx(
+            [-hx + t / 2.0, yc, (z0 + z1) / 2.0],
+            [t / 2.0, hy, (z1 - z0) / 2.0],
+            0.03,
+        );
+        g.bx(
+            [0.0, y_back - t / 2.0, (z0 + z1) / 2.0],
+            [hx - t, t / 2.0, (z1 - z0) / 2.0],
+            0.03,
+        );
+        g.bx([0.0, yc, z1 - t / 2.0], [hx, hy, t / 2.0], 0.03);
+        g.bx([0.0, yc, z0 + t / 2.0], [hx - t, hy, t / 2.0], 0.03);
+        // Shelves between the drawers.
+        for &z in &[0.0815, 0.152] {
+            g.bx([0.0, yc, z], [hx - t, hy, 0.003], 0.01);
+        }
+    }
+    site(
+        out,
+        p,
+        "top_side",
+        [0.00354, 0.01567, 0.22152],
+        [1.0, 0.0, 0.0, 0.0],
+        [0.12534, 0.09438, 0.00147],
+    );
+    let region_q = [
+        std::f64::consts::FRAC_1_SQRT_2,
+        0.0,
+        std::f64::consts::FRAC_1_SQRT_2,
+        0.0,
+    ];
+    for (level, region, zc, n0) in [
+        ("top_level", "top_region", 0.18563, 20),
+        ("middle_level", "middle_region", 0.11690, 30),
+        ("bottom_level", "bottom_region", 0.04701, 40),
+    ] {
+        let _ = writeln!(
+            out,
+            r#"<body name="{p}_{level}_drawer" pos="0 0 0">
+<inertial pos="0 0.01 {}" mass="3" diaginertia="1 1 1"/>
+<joint name="{p}_{level}" type="slide" axis="0 1 0" range="-0.16 0.01" limited="true" damping="50"/>"#,
+            f(zc)
+        );
+        {
+            let mut g = geoms(out, p, [0.6, 0.4, 0.22, 1.0]);
+            g.n = n0;
+            let (dx, dy0, dy1) = (0.106, -0.086, 0.112);
+            let (bot, top) = (zc - 0.031, zc + 0.027);
+            let dyc = 0.5 * (dy0 + dy1);
+            let dhy = 0.5 * (dy1 - dy0);
+            let wall_h = 0.5 * (top - bot);
+            g.bx([0.0, dyc, bot + 0.002], [dx, dhy, 0.002], 0.0);
+            g.bx([dx - 0.002, dyc, bot + wall_h], [0.002, dhy, wall_h], 0.0);
+            g.bx([-dx + 0.002, dyc, bot + wall_h], [0.002, dhy, wall_h], 0.0);
+            g.bx([0.0, dy1 - 0.002, bot + wall_h], [dx, 0.002, wall_h], 0.0);
+            // Front panel (closes the carcass) and the handle.
+            g.bx([0.0, dy0 - 0.006, zc - 0.002], [0.118, 0.006, 0.032], 0.0);
+            let mut h = geoms(g.out, p, [0.75, 0.72, 0.65, 1.0]);
+            h.n = n0 + 5;
+            h.bx([0.0, dy0 - 0.026, zc], [0.035, 0.005, 0.006], 0.0);
+            h.bx([0.03, dy0 - 0.018, zc], [0.004, 0.007, 0.005], 0.0);
+            h.bx([-0.03, dy0 - 0.018, zc], [0.004, 0.007, 0.005], 0.0);
+        }
+        site(
+            out,
+            p,
+            region,
+            [0.00328, 0.01128, zc],
+            region_q,
+            DRAWER_REGION_HALF,
+        );
+        out.push_str("</body>\n");
+    }
+}
+
+/// Quaternion of a yaw `a` about z (wxyz), as LIBERO's fixture sampler writes it.
+pub fn yaw_quat(a: f64) -> [f64; 4] {
+    qz(a)
+}
+
+/// `x`-axis rotation quaternion (wxyz).
+pub fn x_quat(a: f64) -> [f64; 4] {
+    qx(a)
+}
+
+/// Right angle, for callers composing placement quaternions.
+pub const RIGHT_ANGLE: f64 = FRAC_PI_2;
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::mujoco::{Data, Model, ObjType};
+    use std::sync::Arc;
+
+    fn world_with(def: &AssetDef, z: f64) -> String {
+        format!(
+            r#"<mujoco><compiler angle="radian" autolimits="true"/><option timestep="0.002"/>
+<worldbody><geom name="floor" type="plane" size="1 1 0.1"/>{}</worldbody></mujoco>"#,
+            instance_xml(
+                def,
+                &format!("{}_1", def.category),
+                [0.0, 0.0, z],
+                [1.0, 0.0, 0.0, 0.0]
+            )
+        )
+    }
+
+    #[test]
+    fn every_asset_compiles_with_its_sites_and_joints() {
+        for def in ASSETS {
+            let model = Model::from_xml_str(&world_with(def, 0.1))
+                .unwrap_or_else(|e| panic!("{}: {e}", def.category));
+            let inst = format!("{}_1", def.category);
+            assert!(model.id(ObjType::Body, &format!("{inst}_main")).is_some());
+            for s in def.sites {
+                assert!(
+                    model
+                        .id(ObjType::Site, &format!("{inst}_{}", s.name))
+                        .is_some(),
+                    "{inst} lacks {}",
+                    s.name
+                );
+            }
+            for (j, _) in def.joints {
+                assert!(
+                    model.id(ObjType::Joint, &format!("{inst}_{j}")).is_some(),
+                    "{inst} lacks joint {j}"
+                );
+            }
+        }
+    }
+
+    fn aabb(model: &Arc<Model>, data: &Data, body_root: usize) -> ([f64; 3], [f64; 3]) {
+        let mut lo = [f64::MAX; 3];
+        let mut hi = [f64::MIN; 3];
+        for g in 0..model.ngeom() {
+            if model.body_root(model.geom_body(g)) != body_root {
+                continue;
+            }
+            let r = unsafe { *model.raw().geom_rbound.add(g) };
+            let c = data.geom_pos(g);
+            for k in 0..3 {
+                lo[k] = lo[k].min(c[k] - r);
+                hi[k] = hi[k].max(c[k] + r);
+            }
+        }
+        (lo, hi)
+    }
+
+    #[test]
+    fn movable_objects_are_sized_like_liberos() {
+        // Bounding-sphere AABB is a loose upper bound; the footprint checks below use known extents.
+        for (cat, w, h) in [
+            ("akita_black_bowl", 0.107, 0.052),
+            ("plate", 0.138, 0.0164),
+            ("basket", 0.170, 0.1457),
+            ("wine_bottle", 0.043, 0.158),
+        ] {
+            let def = asset(cat).unwrap();
+            let model = Arc::new(Model::from_xml_str(&world_with(def, 0.0)).unwrap());
+            let mut d = Data::new(model.clone()).unwrap();
+            d.forward().unwrap();
+            let root = model.id(ObjType::Body, &format!("{cat}_1_main")).unwrap();
+            let (lo, hi) = aabb(&model, &d, root);
+            assert!(hi[0] - lo[0] >= w * 0.95, "{cat} width {}", hi[0] - lo[0]);
+            assert!(hi[2] >= h * 0.98, "{cat} top {}", hi[2]);
+        }
+    }
+
+    #[test]
+    fn objects_rest_on_the_floor() {
+        for cat in [
+            "akita_black_bowl",
+            "plate",
+            "basket",
+            "cream_cheese",
+            "wine_bottle",
+        ] {
+            let def = asset(cat).unwrap();
+            let model = Arc::new(Model::from_xml_str(&world_with(def, 0.05)).unwrap());
+            let mut d = Data::new(model.clone()).unwrap();
+            for _ in 0..500 {
+                d.step().unwrap();
+            }
+            let root = model.id(ObjType::Body, &format!("{cat}_1_main")).unwrap();
+            let q = d.body_quat(root);
+            assert!(q[0].abs() > 0.99, "{cat} tipped over: {q:?}");
+            let v: f64 = d.qvel().iter().map(|x| x.abs()).sum();
+            assert!(v < 0.05, "{cat} still moving: {v}");
+        }
+    }
+
+    #[test]
+    fn articulation_thresholds_follow_libero() {
+        let d = Articulation::CabinetDrawer;
+        assert!(d.is_open(-0.15) && !d.is_open(-0.14) && d.is_close(0.001) && !d.is_close(0.0));
+        let k = Articulation::StoveKnob;
+        assert!(k.turn_on(0.5) && !k.turn_on(0.49) && k.turn_off(-0.001) && !k.turn_off(0.0));
+    }
+}

@@ -1,0 +1,756 @@
+//! Scene composition: a task description (BDDL, through [`SceneSpec`]) → one compiled MuJoCo world, and
+//! seeded placement of fixtures and objects at every reset (libero.md §4).
+//!
+//! Assembly order follows LIBERO (§4.2), so qpos is the 7 arm joints, the 2 fingers, each movable object's
+//! free joint in `:objects` order, then the fixtures' internal joints. Fixtures are mocap bodies: their poses
+//! are drawn per episode like LIBERO's (which rewrites `body_pos`), without recompiling the model.
+//!
+//! Deliberate deviations from LIBERO, for valid starts: objects are dropped from 5 mm above their true
+//! geometry (LIBERO's placement metadata leaves them several cm in the air), and candidates whose true
+//! footprints overlap an already placed object or fixture are rejected too.
+
+use std::collections::HashMap;
+use std::fmt::Write;
+use std::sync::Arc;
+
+use rand::Rng;
+use rand_chacha::ChaCha8Rng;
+
+use crate::assets::{self, Articulation, AssetDef, AssetKind};
+use crate::mujoco::{Data, MjError, Model, ObjType};
+use crate::robot::{BASE_POS, ENV_CONAFFINITY, ENV_CONTYPE, panda_xml};
+
+/// Errors while composing or placing a scene.
+#[derive(Debug, thiserror::Error)]
+pub enum SceneError {
+    /// The task names a category the asset library lacks.
+    #[error(
+        "unknown object category '{category}' for '{instance}' (the asset library has: {known})"
+    )]
+    UnknownCategory {
+        /// Instance name.
+        instance: String,
+        /// Category name.
+        category: String,
+        /// Known categories.
+        known: String,
+    },
+    /// The problem class is not one we build.
+    #[error(
+        "unsupported problem class '{0}' (supported: libero_tabletop_manipulation, libero_kitchen_tabletop_manipulation)"
+    )]
+    ProblemClass(String),
+    /// An `:init` atom this composer cannot realise.
+    #[error("cannot realise init atom ({0})")]
+    Init(String),
+    /// Placement failed after many tries.
+    #[error("could not place '{0}' without collisions after {1} tries")]
+    Placement(String, usize),
+    /// MuJoCo failed.
+    #[error(transparent)]
+    Mujoco(#[from] MjError),
+}
+
+/// A region declared in the task (`(:regions (name (:target t) …))`).
+#[derive(Debug, Clone, PartialEq)]
+pub struct RegionSpec {
+    /// Region name as written (`plate_region`).
+    pub name: String,
+    /// Target entity (`main_table`, `basket_1`).
+    pub target: String,
+    /// Rectangles `x0 y0 x1 y1`, relative to the workspace reference.
+    pub ranges: Vec<[f64; 4]>,
+    /// Yaw range (last pair in the file).
+    pub yaw: [f64; 2],
+    /// Colour (alpha 0 = invisible).
+    pub rgba: [f64; 4],
+}
+
+impl RegionSpec {
+    /// `<target>_<name>`, the key BDDL atoms use.
+    pub fn key(&self) -> String {
+        format!("{}_{}", self.target, self.name)
+    }
+}
+
+/// A named instance of a category.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct InstanceSpec {
+    /// Instance name (`plate_1`).
+    pub name: String,
+    /// Category (`plate`).
+    pub category: String,
+}
+
+/// A ground atom `(pred arg…)`, predicate lowercase.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct AtomSpec {
+    /// Predicate name, lowercase.
+    pub predicate: String,
+    /// Arguments: instance names or region keys.
+    pub args: Vec<String>,
+}
+
+impl std::fmt::Display for AtomSpec {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "{}", self.predicate)?;
+        for a in &self.args {
+            write!(f, " {a}")?;
+        }
+        Ok(())
+    }
+}
+
+/// What the composer needs from a task description.
+#[derive(Debug, Clone, PartialEq)]
+pub struct SceneSpec {
+    /// BDDL problem class, lowercase.
+    pub problem_class: String,
+    /// Regions in file order.
+    pub regions: Vec<RegionSpec>,
+    /// Fixtures in file order (the workspace included).
+    pub fixtures: Vec<InstanceSpec>,
+    /// Movable objects in file order.
+    pub objects: Vec<InstanceSpec>,
+    /// Initial-state atoms.
+    pub init: Vec<AtomSpec>,
+}
+
+/// Arena (LIBERO problem class).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Arena {
+    /// `LIBERO_Tabletop_Manipulation`: `main_table`, friction 0.6, TargetZones at z 0.895.
+    Tabletop,
+    /// `LIBERO_Kitchen_Tabletop_Manipulation`: `kitchen_table`, friction 1.0, TargetZones at z 0.875.
+    Kitchen,
+}
+
+impl Arena {
+    fn from_class(class: &str) -> Result<Arena, SceneError> {
+        match class {
+            "libero_tabletop_manipulation" => Ok(Arena::Tabletop),
+            "libero_kitchen_tabletop_manipulation" => Ok(Arena::Kitchen),
+            other => Err(SceneError::ProblemClass(other.to_string())),
+        }
+    }
+
+    /// Name of the workspace instance.
+    pub fn workspace(self) -> &'static str {
+        match self {
+            Arena::Tabletop => "main_table",
+            Arena::Kitchen => "kitchen_table",
+        }
+    }
+
+    fn target_zone_z(self) -> f64 {
+        match self {
+            Arena::Tabletop => 0.895,
+            Arena::Kitchen => 0.875,
+        }
+    }
+
+    fn friction(self) -> &'static str {
+        match self {
+            Arena::Tabletop => "0.6 0.005 0.0001",
+            Arena::Kitchen => "1 0.005 0.0001",
+        }
+    }
+}
+
+/// Height of the table top (both arenas).
+pub const TABLE_TOP: f64 = 0.90;
+/// LIBERO's fixture z offset on the tabletop and kitchen tables.
+const FIXTURE_Z_OFFSET: f64 = -0.04;
+
+/// True geometry of the built-in assets: (bottom z, top z, footprint radius) relative to the origin.
+fn true_extent(category: &str) -> (f64, f64, f64) {
+    match category {
+        "akita_black_bowl" => (0.0, 0.052, 0.054),
+        "plate" => (0.0, 0.0164, 0.069),
+        "basket" => (0.0042, 0.1457, 0.116),
+        "cream_cheese" => (-0.009, 0.009, 0.046),
+        "wine_bottle" => (0.001, 0.158, 0.022),
+        _ => (0.0, 0.1, 0.05),
+    }
+}
+
+/// Fixture footprint: local AABB (x0, y0, x1, y1) with drawers closed / knob home.
+fn fixture_footprint(category: &str) -> [f64; 4] {
+    match category {
+        // Drawers may open by 0.16 m toward local −y, handles stick out 3 cm more.
+        "wooden_cabinet" => [-0.128, -0.16, 0.128, 0.127],
+        "flat_stove" => [-0.052, -0.095, 0.245, 0.095],
+        "wine_rack" => [-0.135, -0.127, 0.135, 0.127],
+        _ => [-0.05, -0.05, 0.05, 0.05],
+    }
+}
+
+/// An instance in the compiled world.
+#[derive(Debug, Clone)]
+pub struct SceneInstance {
+    /// Instance name.
+    pub name: String,
+    /// The asset.
+    pub def: &'static AssetDef,
+    /// Root body `<name>_main`.
+    pub root_body: usize,
+    /// qpos address of the free joint (movable objects).
+    pub qpos_adr: Option<usize>,
+    /// Mocap index (fixtures).
+    pub mocap: Option<usize>,
+    /// Geoms of the whole subtree.
+    pub geoms: Vec<usize>,
+    /// Internal joints: (joint id, qpos address, class).
+    pub joints: Vec<(usize, usize, Articulation)>,
+}
+
+/// A region resolved against the compiled world.
+#[derive(Debug, Clone)]
+pub struct SceneRegion {
+    /// The declaration.
+    pub spec: RegionSpec,
+    /// The site (TargetZone on the table, or the asset's site); `None` if the target has no such site
+    /// (LIBERO silently ignores those).
+    pub site: Option<usize>,
+    /// Index into [`Scene::instances`] of the owning instance (object-attached regions).
+    pub parent: Option<usize>,
+    /// Joints that are direct children of the site's body (for Open/Close on a region).
+    pub joints: Vec<(usize, usize, Articulation)>,
+}
+
+/// A compiled world ready for episodes.
+pub struct Scene {
+    /// The compiled model.
+    pub model: Arc<Model>,
+    /// Arena.
+    pub arena: Arena,
+    /// Movable objects (file order) then fixtures (file order, workspace excluded).
+    pub instances: Vec<SceneInstance>,
+    /// Regions by key.
+    pub regions: HashMap<String, SceneRegion>,
+    /// The task description.
+    pub spec: SceneSpec,
+    /// The MJCF it was compiled from.
+    pub xml: String,
+}
+
+impl std::fmt::Debug for Scene {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Scene")
+            .field("arena", &self.arena)
+            .field(
+                "instances",
+                &self.instances.iter().map(|i| &i.name).collect::<Vec<_>>(),
+            )
+            .finish()
+    }
+}
+
+/// Builds the MJCF of the arena, robot, objects and fixtures of `spec`.
+pub fn compose_xml(spec: &SceneSpec) -> Result<String, SceneError> {
+    let arena = Arena::from_class(&spec.problem_class)?;
+    let ws = arena.workspace();
+    let panda = panda_xml(BASE_POS);
+    let mut zones = String::new();
+    for r in &spec.regions {
+        if r.target != ws {
+            continue;
+        }
+        let Some(rect) = r.ranges.first() else {
+            continue;
+        };
+        let (cx, cy) = ((rect[0] + rect[2]) / 2.0, (rect[1] + rect[3]) / 2.0);
+        let (hx, hy) = (
+            ((rect[2] - rect[0]) / 2.0).abs(),
+            ((rect[3] - rect[1]) / 2.0).abs(),
+        );
+        let rgba = r.rgba;
+        let _ = writeln!(
+            zones,
+            r#"<site name="{}" type="box" pos="{cx} {cy} {}" size="{} {} 0.007" rgba="{} {} {} {}" group="3"/>"#,
+            r.key(),
+            arena.target_zone_z() - 0.875,
+            hx.max(1e-4),
+            hy.max(1e-4),
+            rgba[0],
+            rgba[1],
+            rgba[2],
+            rgba[3]
+        );
+    }
+    let mut bodies = String::new();
+    for o in &spec.objects {
+        let def = lookup(o)?;
+        if def.kind != AssetKind::Movable {
+            return Err(SceneError::Init(format!(
+                "'{}' ({}) is a fixture in this library but is listed under :objects",
+                o.name, o.category
+            )));
+        }
+        bodies.push_str(&assets::instance_xml(
+            def,
+            &o.name,
+            [0.0, 0.0, 1.5],
+            [1.0, 0.0, 0.0, 0.0],
+        ));
+    }
+    for fx in &spec.fixtures {
+        if assets::WORKSPACE_CATEGORIES.contains(&fx.category.as_str()) || fx.name == ws {
+            continue;
+        }
+        let def = lookup(fx)?;
+        if def.kind != AssetKind::Fixture {
+            return Err(SceneError::Init(format!(
+                "'{}' ({}) is a movable object in this library but is listed under :fixtures",
+                fx.name, fx.category
+            )));
+        }
+        bodies.push_str(&assets::instance_xml(
+            def,
+            &fx.name,
+            [0.0, 0.0, -2.0],
+            [1.0, 0.0, 0.0, 0.0],
+        ));
+    }
+    let (wall, floor1, floor2, table) = match arena {
+        Arena::Tabletop => (
+            "0.82 0.82 0.80 1",
+            "0.62 0.62 0.62",
+            "0.56 0.56 0.56",
+            "0.62 0.45 0.30 1",
+        ),
+        Arena::Kitchen => (
+            "0.86 0.84 0.78 1",
+            "0.55 0.5 0.45",
+            "0.5 0.45 0.4",
+            "0.70 0.55 0.38 1",
+        ),
+    };
+    Ok(format!(
+        r#"<mujoco model="{class}">
+<compiler angle="radian" autolimits="true"/>
+<option timestep="0.002" impratio="20" cone="elliptic" density="1.2" viscosity="2e-5"/>
+<visual><global offwidth="256" offheight="256"/><quality offsamples="0" numslices="16" numstacks="8" numquads="1"/><headlight ambient="0.25 0.25 0.25" diffuse="0.3 0.3 0.3" specular="0.1 0.1 0.1"/></visual>
+<asset>
+<texture name="floor_tex" type="2d" builtin="checker" rgb1="{floor1}" rgb2="{floor2}" width="64" height="64"/>
+<material name="floor_mat" texture="floor_tex" texrepeat="12 12" reflectance="0"/>
+<material name="table_mat" rgba="{table}" reflectance="0"/>
+<material name="wall_mat" rgba="{wall}" reflectance="0"/>
+</asset>
+<default>
+{defaults}</default>
+<worldbody>
+<light name="light0" pos="1 1 4" dir="-0.24 -0.24 -0.94" diffuse="0.55 0.55 0.55" specular="0.2 0.2 0.2" castshadow="false"/>
+<light name="light1" pos="-3 -3 4" dir="0.51 0.51 -0.69" diffuse="0.55 0.55 0.55" specular="0.2 0.2 0.2" castshadow="false"/>
+<geom name="floor" type="plane" size="3 3 0.125" material="floor_mat" contype="{ct}" conaffinity="{ca}" group="1"/>
+<geom name="wall_back" type="box" pos="-1.6 0 1.5" size="0.01 3 1.5" material="wall_mat" contype="0" conaffinity="0" group="1"/>
+<geom name="wall_left" type="box" pos="0 3 1.5" size="3 0.01 1.5" material="wall_mat" contype="0" conaffinity="0" group="1"/>
+<geom name="wall_right" type="box" pos="0 -3 1.5" size="3 0.01 1.5" material="wall_mat" contype="0" conaffinity="0" group="1"/>
+<body name="{ws}" pos="0 0 0.875">
+<geom name="{ws}_collision" type="box" size="0.5 0.6 0.025" friction="{friction}" material="table_mat" contype="{ct}" conaffinity="{ca}" group="1"/>
+<geom name="{ws}_leg1" type="cylinder" fromto="0.4 0.5 -0.025 0.4 0.5 -0.875" size="0.025" contype="0" conaffinity="0" group="1" rgba="0.3 0.3 0.3 1"/>
+<geom name="{ws}_leg2" type="cylinder" fromto="-0.4 0.5 -0.025 -0.4 0.5 -0.875" size="0.025" contype="0" conaffinity="0" group="1" rgba="0.3 0.3 0.3 1"/>
+<geom name="{ws}_leg3" type="cylinder" fromto="0.4 -0.5 -0.025 0.4 -0.5 -0.875" size="0.025" contype="0" conaffinity="0" group="1" rgba="0.3 0.3 0.3 1"/>
+<geom name="{ws}_leg4" type="cylinder" fromto="-0.4 -0.5 -0.025 -0.4 -0.5 -0.875" size="0.025" contype="0" conaffinity="0" group="1" rgba="0.3 0.3 0.3 1"/>
+<site name="{ws}_top" pos="0 0 0.025" size="0.001" rgba="0 0 0 0"/>
+{zones}</body>
+<camera name="agentview" pos="0.6586131746834771 0 1.6103500240372423" quat="0.6380177736282349 0.3048497438430786 0.30484986305236816 0.6380177736282349" fovy="45"/>
+<camera name="frontview" pos="1.0 0 1.48" quat="0.56 0.43 0.43 0.56" fovy="45"/>
+{robot}{bodies}</worldbody>
+<actuator>
+{actuators}</actuator>
+</mujoco>
+"#,
+        class = spec.problem_class,
+        defaults = panda.defaults,
+        robot = panda.body,
+        actuators = panda.actuators,
+        friction = arena.friction(),
+        ct = ENV_CONTYPE,
+        ca = ENV_CONAFFINITY,
+    ))
+}
+
+fn lookup(inst: &InstanceSpec) -> Result<&'static AssetDef, SceneError> {
+    assets::asset(&inst.category).ok_or_else(|| SceneError::UnknownCategory {
+        instance: inst.name.clone(),
+        category: inst.category.clone(),
+        known: assets::categories().join(", "),
+    })
+}
+
+impl Scene {
+    /// Composes and compiles the world of `spec`.
+    pub fn build(spec: SceneSpec) -> Result<Scene, SceneError> {
+        let arena = Arena::from_class(&spec.problem_class)?;
+        let xml = compose_xml(&spec)?;
+        let model = Arc::new(Model::from_xml_str(&xml)?);
+        let ws = arena.workspace();
+        let mut instances = Vec::new();
+        let fixtures = spec.fixtures.iter().filter(|f| {
+            !(assets::WORKSPACE_CATEGORIES.contains(&f.category.as_str()) || f.name == ws)
+        });
+        for inst in spec.objects.iter().chain(fixtures) {
+            let def = lookup(inst)?;
+            let root_body = model.require(ObjType::Body, &format!("{}_main", inst.name))?;
+            let geoms = (0..model.ngeom())
+                .filter(|&g| model.body_root(model.geom_body(g)) == root_body)
+                .collect();
+            let qpos_adr = match def.kind {
+                AssetKind::Movable => {
+                    let j = model.require(ObjType::Joint, &format!("{}_joint0", inst.name))?;
+                    Some(model.joint_qpos_adr(j))
+                }
+                AssetKind::Fixture => None,
+            };
+            let mut joints = Vec::new();
+            for (jn, art) in def.joints {
+                let j = model.require(ObjType::Joint, &format!("{}_{jn}", inst.name))?;
+                joints.push((j, model.joint_qpos_adr(j), *art));
+            }
+            instances.push(SceneInstance {
+                name: inst.name.clone(),
+                def,
+                root_body,
+                qpos_adr,
+                mocap: model.body_mocap(root_body),
+                geoms,
+                joints,
+            });
+        }
+        let mut regions = HashMap::new();
+        for r in &spec.regions {
+            let key = r.key();
+            let site = model.id(ObjType::Site, &key);
+            let parent = instances.iter().position(|i| i.name == r.target);
+            let joints = match (site, parent) {
+                (Some(s), Some(pi)) => {
+                    let body = model.site_body(s);
+                    instances[pi]
+                        .joints
+                        .iter()
+                        .filter(|(j, _, _)| model.joint_body(*j) == body)
+                        .copied()
+                        .collect()
+                }
+                _ => Vec::new(),
+            };
+            regions.insert(
+                key,
+                SceneRegion {
+                    spec: r.clone(),
+                    site,
+                    parent,
+                    joints,
+                },
+            );
+        }
+        Ok(Scene {
+            model,
+            arena,
+            instances,
+            regions,
+            spec,
+            xml,
+        })
+    }
+
+    /// Index of the named instance.
+    pub fn instance(&self, name: &str) -> Option<usize> {
+        self.instances.iter().position(|i| i.name == name)
+    }
+
+    /// Instance owning body `body` (via its root), if any.
+    pub fn instance_of_body(&self, body: usize) -> Option<usize> {
+        let root = self.model.body_root(body);
+        self.instances.iter().position(|i| i.root_body == root)
+    }
+
+    /// Draws an initial state from `rng` into `data` (LIBERO's order, §4.3): articulation atoms, workspace
+    /// placements in `:init` order, site-conditioned placements, then object-on-object stacking. Ends with
+    /// a forward pass; velocities are zero.
+    pub fn sample_init(&self, data: &mut Data, rng: &mut ChaCha8Rng) -> Result<(), SceneError> {
+        let ws = self.arena.workspace();
+        // Park every movable object far away; unplaced ones stay there.
+        for (k, inst) in self.instances.iter().enumerate() {
+            if let Some(a) = inst.qpos_adr {
+                let q = data.qpos_mut();
+                q[a..a + 7].copy_from_slice(&[2.0 + 0.3 * k as f64, 2.0, 0.1, 1.0, 0.0, 0.0, 0.0]);
+            }
+            for &(_, adr, _) in &inst.joints {
+                data.qpos_mut()[adr] = 0.0;
+            }
+        }
+        // 1. Articulation atoms.
+        for atom in &self.spec.init {
+            let p = atom.predicate.as_str();
+            if !matches!(p, "open" | "close" | "turnon" | "turnoff") {
+                continue;
+            }
+            let target = atom
+                .args
+                .first()
+                .ok_or_else(|| SceneError::Init(atom.to_string()))?;
+            let joints = self
+                .articulated_joints(target)
+                .ok_or_else(|| SceneError::Init(atom.to_string()))?;
+            for (_, adr, art) in joints {
+                let [lo, hi] = if matches!(p, "open" | "turnon") {
+                    art.open_range()
+                } else {
+                    art.close_range()
+                };
+                data.qpos_mut()[adr] = rng.random_range(lo..=hi);
+            }
+        }
+        // 2. Workspace placements, in :init order.
+        let mut placed: Vec<Placed> = Vec::new();
+        for atom in &self.spec.init {
+            if atom.predicate != "on" || atom.args.len() != 2 {
+                continue;
+            }
+            let (what, region) = (&atom.args[0], &atom.args[1]);
+            let Some(r) = self.regions.get(region) else {
+                continue;
+            };
+            if r.spec.target != ws {
+                continue;
+            }
+            let Some(ii) = self.instance(what) else {
+                return Err(SceneError::Init(format!(
+                    "{atom}: unknown instance '{what}'"
+                )));
+            };
+            let rect = *r
+                .spec
+                .ranges
+                .first()
+                .ok_or_else(|| SceneError::Init(format!("{atom}: region has no :ranges")))?;
+            self.place_on_workspace(data, rng, ii, rect, r.spec.yaw, &mut placed)?;
+        }
+        data.forward()?;
+        // 3. Site-conditioned placements (On/In a site of another instance).
+        for atom in &self.spec.init {
+            if !matches!(atom.predicate.as_str(), "on" | "in") || atom.args.len() != 2 {
+                continue;
+            }
+            let Some(r) = self.regions.get(&atom.args[1]) else {
+                continue;
+            };
+            if r.spec.target == ws {
+                continue;
+            }
+            let (Some(site), Some(ii)) = (r.site, self.instance(&atom.args[0])) else {
+                return Err(SceneError::Init(atom.to_string()));
+            };
+            let inst = &self.instances[ii];
+            let adr = inst
+                .qpos_adr
+                .ok_or_else(|| SceneError::Init(format!("{atom}: not movable")))?;
+            let p = data.site_pos(site);
+            let half = self.model.site_size(site);
+            let (bottom, _, _) = true_extent(inst.def.category);
+            let z = p[2] - half[2].min(0.01) - bottom + 0.005;
+            let q = inst.def.placement_quat;
+            data.qpos_mut()[adr..adr + 7].copy_from_slice(&[p[0], p[1], z, q[0], q[1], q[2], q[3]]);
+        }
+        // 4. Object-on-object stacking, repeated so chains (a on b on c) settle in any order.
+        for _ in 0..3 {
+            for atom in &self.spec.init {
+                if atom.predicate != "on" || atom.args.len() != 2 {
+                    continue;
+                }
+                let (Some(a), Some(b)) =
+                    (self.instance(&atom.args[0]), self.instance(&atom.args[1]))
+                else {
+                    continue;
+                };
+                let (ia, ib) = (&self.instances[a], &self.instances[b]);
+                let (Some(aa), Some(ab)) = (ia.qpos_adr, ib.qpos_adr) else {
+                    return Err(SceneError::Init(format!(
+                        "{atom}: stacking needs two movable objects"
+                    )));
+                };
+                let qb: Vec<f64> = data.qpos()[ab..ab + 3].to_vec();
+                let (_, top_b, _) = true_extent(ib.def.category);
+                let (bot_a, _, _) = true_extent(ia.def.category);
+                let q = ia.def.placement_quat;
+                data.qpos_mut()[aa..aa + 7].copy_from_slice(&[
+                    qb[0],
+                    qb[1],
+                    qb[2] + top_b - bot_a + 0.005,
+                    q[0],
+                    q[1],
+                    q[2],
+                    q[3],
+                ]);
+            }
+        }
+        data.qvel_mut().fill(0.0);
+        data.forward()?;
+        Ok(())
+    }
+
+    /// Joints an articulation atom refers to: a region's site joints or an instance's joints.
+    fn articulated_joints(&self, target: &str) -> Option<Vec<(usize, usize, Articulation)>> {
+        if let Some(r) = self.regions.get(target) {
+            return Some(r.joints.clone());
+        }
+        self.instance(target)
+            .map(|i| self.instances[i].joints.clone())
+    }
+
+    fn place_on_workspace(
+        &self,
+        data: &mut Data,
+        rng: &mut ChaCha8Rng,
+        ii: usize,
+        rect: [f64; 4],
+        yaw: [f64; 2],
+        placed: &mut Vec<Placed>,
+    ) -> Result<(), SceneError> {
+        let inst = &self.instances[ii];
+        let def = inst.def;
+        match def.kind {
+            AssetKind::Fixture => {
+                // MultiRegionRandomSampler: uniform, no shrink, no collision check; yaw about z.
+                let x = uniform(rng, rect[0], rect[2]);
+                let y = uniform(rng, rect[1], rect[3]);
+                let a = uniform(rng, yaw[0], yaw[1]);
+                let z = TABLE_TOP + FIXTURE_Z_OFFSET - def.bottom_offset;
+                let m = inst.mocap.expect("fixtures are mocap bodies");
+                data.mocap_pos_mut()[3 * m..3 * m + 3].copy_from_slice(&[x, y, z]);
+                data.mocap_quat_mut()[4 * m..4 * m + 4].copy_from_slice(&assets::yaw_quat(a));
+                placed.push(Placed::fixture(def.category, x, y, a));
+                Ok(())
+            }
+            AssetKind::Movable => {
+                let r = def.horizontal_radius;
+                let (x0, x1, y0, y1) = match self.arena {
+                    // TableRegionSampler shrinks by the radius (numpy accepts low > high, so a region
+                    // narrower than 2r widens to [x1 − r, x0 + r]).
+                    Arena::Tabletop => (rect[0] + r, rect[2] - r, rect[1] + r, rect[3] - r),
+                    // Libero100TableRegionSampler uses the plain range.
+                    Arena::Kitchen => (rect[0], rect[2], rect[1], rect[3]),
+                };
+                // The widened range can leave the region, making the `:init` atom false from the start;
+                // we keep draws inside the region (1 mm margin) so every init relation holds.
+                let (x0, x1) = clip_range(x0, x1, rect[0], rect[2]);
+                let (y0, y1) = clip_range(y0, y1, rect[1], rect[3]);
+                let (bottom, top, foot) = true_extent(def.category);
+                let z = TABLE_TOP - bottom + 0.005;
+                const TRIES: usize = 5000;
+                for _ in 0..TRIES {
+                    let x = uniform(rng, x0, x1);
+                    let y = uniform(rng, y0, y1);
+                    let ok = placed
+                        .iter()
+                        .all(|p| !p.blocks(x, y, z, r, def.bottom_offset, foot, bottom, top));
+                    if ok {
+                        let adr = inst.qpos_adr.expect("movable objects have a free joint");
+                        let q = def.placement_quat;
+                        data.qpos_mut()[adr..adr + 7]
+                            .copy_from_slice(&[x, y, z, q[0], q[1], q[2], q[3]]);
+                        placed.push(Placed::object(x, y, z, r, def.top_offset, foot));
+                        return Ok(());
+                    }
+                }
+                Err(SceneError::Placement(inst.name.clone(), TRIES))
+            }
+        }
+    }
+}
+
+/// `[lo, hi]` (either order) intersected with the rectangle side `[a, b]` shrunk by 1 mm.
+fn clip_range(lo: f64, hi: f64, a: f64, b: f64) -> (f64, f64) {
+    let (lo, hi) = (lo.min(hi), lo.max(hi));
+    let (a, b) = (a.min(b) + 0.001, a.max(b) - 0.001);
+    let (l, h) = (lo.max(a), hi.min(b));
+    if l <= h {
+        (l, h)
+    } else {
+        ((a + b) / 2.0, (a + b) / 2.0)
+    }
+}
+
+/// numpy's `uniform(low, high)`: also valid (and symmetric) when low > high.
+fn uniform(rng: &mut ChaCha8Rng, low: f64, high: f64) -> f64 {
+    let u: f64 = rng.random();
+    low + (high - low) * u
+}
+
+/// An already placed item, for rejection sampling.
+struct Placed {
+    x: f64,
+    y: f64,
+    z: f64,
+    /// LIBERO's horizontal radius and top offset (its own rejection rule).
+    radius: f64,
+    top_offset: f64,
+    /// True footprint: a circle radius (objects) or an oriented box (fixtures).
+    foot: Foot,
+}
+
+enum Foot {
+    Circle(f64),
+    Box { rect: [f64; 4], yaw: f64 },
+}
+
+impl Placed {
+    fn object(x: f64, y: f64, z: f64, radius: f64, top_offset: f64, foot: f64) -> Placed {
+        Placed {
+            x,
+            y,
+            z,
+            radius,
+            top_offset,
+            foot: Foot::Circle(foot),
+        }
+    }
+
+    fn fixture(category: &str, x: f64, y: f64, yaw: f64) -> Placed {
+        Placed {
+            x,
+            y,
+            z: TABLE_TOP,
+            radius: 0.0,
+            top_offset: 0.0,
+            foot: Foot::Box {
+                rect: fixture_footprint(category),
+                yaw,
+            },
+        }
+    }
+
+    /// LIBERO's rule (xy distance ≤ r + r' and z − z' ≤ top' − bottom) or overlapping true footprints.
+    #[allow(clippy::too_many_arguments)]
+    fn blocks(
+        &self,
+        x: f64,
+        y: f64,
+        z: f64,
+        r: f64,
+        bottom_offset: f64,
+        foot: f64,
+        _bottom: f64,
+        _top: f64,
+    ) -> bool {
+        let d = ((x - self.x).powi(2) + (y - self.y).powi(2)).sqrt();
+        let libero = self.radius > 0.0
+            && d <= self.radius + r
+            && z - self.z <= self.top_offset - bottom_offset;
+        let overlap = match self.foot {
+            Foot::Circle(rr) => d < rr + foot + 0.005,
+            Foot::Box { rect, yaw } => {
+                // Into the fixture's frame, then distance from the circle centre to the rectangle.
+                let (c, s) = (yaw.cos(), yaw.sin());
+                let (dx, dy) = (x - self.x, y - self.y);
+                let (lx, ly) = (c * dx + s * dy, -s * dx + c * dy);
+                let qx = lx.clamp(rect[0], rect[2]);
+                let qy = ly.clamp(rect[1], rect[3]);
+                ((lx - qx).powi(2) + (ly - qy).powi(2)).sqrt() < foot + 0.005
+            }
+        };
+        libero || overlap
+    }
+}
