@@ -540,8 +540,10 @@ fn flat_stove(out: &mut String, p: &str) {
         g.friction = "1 0.005 0.0001";
         g.contact = r#"solref="0.02 1""#;
         // Cook top slab and burner plate (the cook region sits on its surface).
-        g.bx([0.1475, 0.0, -0.009], [0.0975, 0.095, 0.009], 1.0);
-        g.cyl([0.15, 0.0, -0.0015], 0.07, 0.0015, 0.3);
+        // The burner surface is 6 mm above the cook-region site, so a resting object's origin sits inside
+        // `under()`'s window (−2.5 mm … +10 cm) despite contact softness.
+        g.bx([0.1475, 0.0, -0.005], [0.0975, 0.095, 0.009], 1.0);
+        g.cyl([0.15, 0.0, 0.005], 0.07, 0.001, 0.3);
         // Control box under the knob.
         g.bx([-0.001, 0.0, 0.01], [0.051, 0.06, 0.028], 0.2);
     }
