@@ -16,3 +16,4 @@ pub mod assets;
 pub mod bench;
 pub mod predicates;
 pub mod scene;
+pub mod sheet;
