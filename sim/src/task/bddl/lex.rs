@@ -79,7 +79,7 @@ pub(crate) fn read_tree(text: &str) -> Result<Sexp, BddlError> {
                 match stack.pop() {
                     Some((items, open)) => push(&mut stack, &mut top, Sexp::List { items, open }),
                     None => {
-                        return Err(BddlError::at(here, "unbalanced parentheses: this `)` has no matching `("));
+                        return Err(BddlError::at(here, "unbalanced parentheses: this `)` has no matching `(`"));
                     }
                 }
             }
