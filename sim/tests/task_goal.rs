@@ -37,7 +37,11 @@ fn run(t: &mut GoalTracker, trace: &Trace) -> Vec<Progress> {
 
 /// Indices of the steps at which a subgoal was appended.
 fn appends(p: &[Progress]) -> Vec<usize> {
-    p.iter().enumerate().filter(|(_, p)| p.appended).map(|(i, _)| i).collect()
+    p.iter()
+        .enumerate()
+        .filter(|(_, p)| p.appended)
+        .map(|(i, _)| i)
+        .collect()
 }
 
 fn tracker(id: &str) -> GoalTracker {
@@ -54,11 +58,18 @@ fn t1_pick_and_place_back() {
     assert_eq!(t.pending_text().as_deref(), Some("bowl 1 on plate 1"));
     let b1p1 = on(B1, "plate_1");
     // On the plate for 10 steps, lifted for 20, back.
-    let trace = Trace::default().hold(&[b1p1.clone()], 10).hold(&[], 20).hold(&[b1p1.clone()], 5);
+    let trace = Trace::default()
+        .hold(std::slice::from_ref(&b1p1), 10)
+        .hold(&[], 20)
+        .hold(std::slice::from_ref(&b1p1), 5);
     let p = run(&mut t, &trace);
     assert_eq!(appends(&p), [30]);
     assert!(p[..30].iter().all(|p| !p.done && p.satisfied == 0));
-    assert!(p[30..].iter().all(|p| p.done && !p.failed && p.tiered() == 1.0));
+    assert!(
+        p[30..]
+            .iter()
+            .all(|p| p.done && !p.failed && p.tiered() == 1.0)
+    );
     assert!(t.done() && t.completed() && !t.failed());
     assert_eq!(t.satisfied(), [b1p1]);
     assert_eq!(t.satisfied_texts(), ["one: bowl 1 on plate 1"]);
@@ -83,7 +94,14 @@ fn t3_three_times_first_append_only_after_more_than_15_steps_away() {
     assert_eq!(p[58].satisfied, 0);
     assert!((p[59].tiered() - 1.0 / 3.0).abs() < 1e-12);
     assert!(!p[85].done && p[111].done);
-    assert_eq!(t.satisfied_texts(), ["one: bowl 1 on plate 1", "two: bowl 1 on plate 1", "three: bowl 1 on plate 1"]);
+    assert_eq!(
+        t.satisfied_texts(),
+        [
+            "one: bowl 1 on plate 1",
+            "two: bowl 1 on plate 1",
+            "three: bowl 1 on plate 1"
+        ]
+    );
     assert!(t.done() && !t.failed());
 }
 
@@ -112,10 +130,16 @@ fn the_append_step_counts_towards_the_next_subgoal() {
 fn debounce_false_counts_15_vs_16() {
     let s = [on(B1, "plate_1")];
     // 6 true, then exactly 15 false, then true: no append (the true steps only add to live).
-    let p = run(&mut tracker("t1"), &Trace::default().hold(&s, 6).hold(&[], 15).hold(&s, 10));
+    let p = run(
+        &mut tracker("t1"),
+        &Trace::default().hold(&s, 6).hold(&[], 15).hold(&s, 10),
+    );
     assert_eq!(appends(&p), Vec::<usize>::new());
     // 6 true, 16 false, true: appended on that step.
-    let p = run(&mut tracker("t1"), &Trace::default().hold(&s, 6).hold(&[], 16).hold(&s, 1));
+    let p = run(
+        &mut tracker("t1"),
+        &Trace::default().hold(&s, 6).hold(&[], 16).hold(&s, 1),
+    );
     assert_eq!(appends(&p), [22]);
 }
 
@@ -123,17 +147,32 @@ fn debounce_false_counts_15_vs_16() {
 fn debounce_true_counts_5_vs_6() {
     let s = [on(B1, "plate_1")];
     // 6 counted true before the append step: appended on the first true step after 16 false.
-    let p = run(&mut tracker("t1"), &Trace::default().hold(&s, 6).hold(&[], 16).hold(&s, 2));
+    let p = run(
+        &mut tracker("t1"),
+        &Trace::default().hold(&s, 6).hold(&[], 16).hold(&s, 2),
+    );
     assert_eq!(appends(&p), [22]);
     // Only 5: the first true step after the 16 false becomes the 6th, and the next one appends.
-    let p = run(&mut tracker("t1"), &Trace::default().hold(&s, 5).hold(&[], 16).hold(&s, 2));
+    let p = run(
+        &mut tracker("t1"),
+        &Trace::default().hold(&s, 5).hold(&[], 16).hold(&s, 2),
+    );
     assert_eq!(appends(&p), [22]);
-    let p = run(&mut tracker("t1"), &Trace::default().hold(&s, 5).hold(&[], 16).hold(&s, 1));
+    let p = run(
+        &mut tracker("t1"),
+        &Trace::default().hold(&s, 5).hold(&[], 16).hold(&s, 1),
+    );
     assert_eq!(appends(&p), Vec::<usize>::new());
     // Starting away from the target: 16 false, then the append comes on the 7th true step.
-    let p = run(&mut tracker("t1"), &Trace::default().hold(&[], 16).hold(&s, 7));
+    let p = run(
+        &mut tracker("t1"),
+        &Trace::default().hold(&[], 16).hold(&s, 7),
+    );
     assert_eq!(appends(&p), [22]);
-    let p = run(&mut tracker("t1"), &Trace::default().hold(&[], 16).hold(&s, 6));
+    let p = run(
+        &mut tracker("t1"),
+        &Trace::default().hold(&[], 16).hold(&s, 6),
+    );
     assert_eq!(appends(&p), Vec::<usize>::new());
 }
 
@@ -153,14 +192,28 @@ fn debounce_counters_are_totals_not_streaks() {
 #[test]
 fn debounce_is_configurable() {
     let problem = registry::resolve("t3").unwrap().problem;
-    let d = Debounce { min_true: 0, min_false: 1, overshoot_false: 0 };
+    let d = Debounce {
+        min_true: 0,
+        min_false: 1,
+        overshoot_false: 0,
+    };
     let mut t = GoalTracker::with_debounce(&problem, d).unwrap();
     assert_eq!(t.debounce(), d);
     let s = [on(B1, "plate_1")];
     // live > 0 and nonlive > 1: one true, two false, true appends.
-    let p = run(&mut t, &Trace::default().hold(&s, 1).hold(&[], 2).hold(&s, 1));
+    let p = run(
+        &mut t,
+        &Trace::default().hold(&s, 1).hold(&[], 2).hold(&s, 1),
+    );
     assert_eq!(appends(&p), [3]);
-    assert_eq!(Debounce::default(), Debounce { min_true: 5, min_false: 15, overshoot_false: 5 });
+    assert_eq!(
+        Debounce::default(),
+        Debounce {
+            min_true: 5,
+            min_false: 15,
+            overshoot_false: 5
+        }
+    );
 }
 
 /// T7's start: bowl 1 on plate 1, bowl 2 on plate 2.
@@ -189,9 +242,16 @@ fn t7_swap_via_the_first_branch() {
     assert!(p.last().unwrap().done);
     assert_eq!(
         t.satisfied_texts(),
-        ["one: bowl 1 on plate 3", "two: bowl 2 on plate 1", "three: bowl 1 on plate 2"]
+        [
+            "one: bowl 1 on plate 3",
+            "two: bowl 2 on plate 1",
+            "three: bowl 1 on plate 2"
+        ]
     );
-    assert_eq!(t.satisfied(), [on(B1, "plate_3"), on(B2, "plate_1"), on(B1, "plate_2")]);
+    assert_eq!(
+        t.satisfied(),
+        [on(B1, "plate_3"), on(B2, "plate_1"), on(B1, "plate_2")]
+    );
 }
 
 #[test]
@@ -208,7 +268,11 @@ fn t7_swap_via_the_second_branch() {
     assert!(p.last().unwrap().done && t.completed());
     assert_eq!(
         t.satisfied_texts(),
-        ["one: bowl 2 on plate 3", "two: bowl 1 on plate 2", "three: bowl 2 on plate 1"]
+        [
+            "one: bowl 2 on plate 3",
+            "two: bowl 1 on plate 2",
+            "three: bowl 2 on plate 1"
+        ]
     );
 }
 
@@ -216,7 +280,9 @@ fn t7_swap_via_the_second_branch() {
 fn t7_out_of_order_moves_do_not_count() {
     // Bowl 2 to plate 1 first is no branch's first subgoal: nothing is appended.
     let mut t = tracker("t7");
-    let trace = Trace::default().hold(&[on(B1, "plate_3")], 0).hold(&[on(B2, "plate_1")], 40).hold(&[], 20);
+    let trace = Trace::default()
+        .hold(&[on(B2, "plate_1")], 40)
+        .hold(&[], 20);
     assert_eq!(appends(&run(&mut t, &trace)), Vec::<usize>::new());
     assert_eq!(t.pending_text().as_deref(), Some("bowl 1 on plate 3"));
 }
@@ -241,7 +307,7 @@ fn basket_trace(basket_in: usize, basket_centered: usize) -> Trace {
     let centered = on(&format!("basket_{basket_centered}"), CENTER);
     Trace::default()
         .hold(&[], 20)
-        .hold(&[cc_in.clone()], 10)
+        .hold(std::slice::from_ref(&cc_in), 10)
         .hold(&[], 20)
         .hold(&[cc_in.clone(), centered], 10)
 }
@@ -250,13 +316,19 @@ fn basket_trace(basket_in: usize, basket_centered: usize) -> Trace {
 fn t9_either_basket() {
     for b in [1, 2] {
         let mut t = tracker("t9");
-        assert_eq!(t.pending_text().as_deref(), Some("cream cheese 1 in basket 1"));
+        assert_eq!(
+            t.pending_text().as_deref(),
+            Some("cream cheese 1 in basket 1")
+        );
         let p = run(&mut t, &basket_trace(b, b));
         assert_eq!(appends(&p).len(), 2, "basket {b}");
         assert!(p.last().unwrap().done);
         assert_eq!(
             t.satisfied_texts(),
-            [format!("one: cream cheese 1 in basket {b}"), format!("two: basket {b} in center")]
+            [
+                format!("one: cream cheese 1 in basket {b}"),
+                format!("two: basket {b} in center")
+            ]
         );
         // The other basket in the centre does not complete T9.
         let mut t = tracker("t9");
@@ -275,7 +347,10 @@ fn t10_the_empty_basket_goes_to_the_center() {
         assert!(p.last().unwrap().done);
         assert_eq!(
             t.satisfied_texts(),
-            [format!("one: cream cheese 1 in basket {b}"), format!("two: basket {} in center", 3 - b)]
+            [
+                format!("one: cream cheese 1 in basket {b}"),
+                format!("two: basket {} in center", 3 - b)
+            ]
         );
         let mut t = tracker("t10");
         let p = run(&mut t, &basket_trace(b, b));
@@ -289,7 +364,10 @@ fn t8_rotation_pending_texts() {
     let mut t = tracker("t8");
     assert_eq!(t.goal_len(), 4);
     assert_eq!(t.pending_text().as_deref(), Some("bowl 1 on plate 4"));
-    let p = run(&mut t, &Trace::default().hold(&[], 16).hold(&[on(B1, "plate_4")], 7));
+    let p = run(
+        &mut t,
+        &Trace::default().hold(&[], 16).hold(&[on(B1, "plate_4")], 7),
+    );
     assert_eq!(appends(&p), [22]);
     assert_eq!(t.pending_text().as_deref(), Some("bowl 2 on plate 1"));
 }
@@ -305,21 +383,32 @@ fn over_repetition_fails_on_the_7th_false_step_after_completion() {
     let last = p.last().unwrap();
     assert!(!last.failed && !last.done && last.tiered() == 1.0);
     // Back on the plate: done again, and the false count starts over.
-    let p = run(&mut t, &Trace::default().hold(&s, 1).hold(&[], 6).hold(&s, 1));
+    let p = run(
+        &mut t,
+        &Trace::default().hold(&s, 1).hold(&[], 6).hold(&s, 1),
+    );
     assert!(p.iter().all(|p| !p.failed) && p.last().unwrap().done);
     // The 7th consecutive false step sets the flag, for good.
     let mut t = tracker("t1");
     let p = run(&mut t, &done().hold(&[], 7).hold(&s, 5));
     let n = p.len();
     assert!(!p[n - 7].failed && p[n - 6].failed);
-    assert!(p[n - 6..].iter().all(|p| p.failed && !p.done && p.tiered() == 1.0));
+    assert!(
+        p[n - 6..]
+            .iter()
+            .all(|p| p.failed && !p.done && p.tiered() == 1.0)
+    );
     assert!(t.failed() && !t.done() && t.completed());
 }
 
 #[test]
 fn reset_clears_everything_including_the_overshoot_flag() {
     let s = [on(B1, "plate_1")];
-    let trace = Trace::default().hold(&s, 6).hold(&[], 16).hold(&s, 3).hold(&[], 10);
+    let trace = Trace::default()
+        .hold(&s, 6)
+        .hold(&[], 16)
+        .hold(&s, 3)
+        .hold(&[], 10);
     let mut t = tracker("t3");
     let first = run(&mut t, &trace);
     let mut t1 = tracker("t1");
@@ -344,7 +433,13 @@ fn plain_libero_goal_is_one_subgoal() {
     assert_eq!(t.pending_text().as_deref(), Some("bowl 1 on plate 1"));
     let g = on(B1, "plate_1");
     // No debounce: done on the first step the conjunction holds.
-    let p = run(&mut t, &Trace::default().hold(&[], 3).hold(&[g.clone()], 1).hold(&[], 1));
+    let p = run(
+        &mut t,
+        &Trace::default()
+            .hold(&[], 3)
+            .hold(std::slice::from_ref(&g), 1)
+            .hold(&[], 1),
+    );
     assert_eq!(appends(&p), [3]);
     assert!(!p[2].done && p[3].done && !p[4].done);
     // Satisfied (tiered credit) latches, as LIBERO's evaluation latches success.
@@ -376,7 +471,10 @@ fn plain_conjunction_evaluates_every_atom() {
     assert!(!t.check(&mut |a: &Atom| *a == close, true));
     assert!(t.check(&mut |a: &Atom| *a == close || *a == inside, true));
     assert_eq!(t.pending_text(), None);
-    assert_eq!(t.satisfied_texts(), ["one: close cabinet 1 bottom and bowl 1 in cabinet 1 bottom"]);
+    assert_eq!(
+        t.satisfied_texts(),
+        ["one: close cabinet 1 bottom and bowl 1 in cabinet 1 bottom"]
+    );
 }
 
 #[test]
@@ -394,12 +492,27 @@ fn step_asks_each_atom_once() {
 #[test]
 fn subgoal_texts_for_libero_goal() {
     let want = [
-        ("open_the_middle_drawer_of_the_cabinet", "open cabinet 1 middle"),
+        (
+            "open_the_middle_drawer_of_the_cabinet",
+            "open cabinet 1 middle",
+        ),
         ("put_the_bowl_on_the_stove", "bowl 1 on stove 1"),
-        ("put_the_wine_bottle_on_top_of_the_cabinet", "bottle 1 on cabinet 1 top side"),
-        ("open_the_top_drawer_and_put_the_bowl_inside", "bowl 1 in cabinet 1 top"),
-        ("push_the_plate_to_the_front_of_the_stove", "plate 1 in stove front region"),
-        ("put_the_cream_cheese_in_the_bowl", "cream cheese 1 on bowl 1"),
+        (
+            "put_the_wine_bottle_on_top_of_the_cabinet",
+            "bottle 1 on cabinet 1 top side",
+        ),
+        (
+            "open_the_top_drawer_and_put_the_bowl_inside",
+            "bowl 1 in cabinet 1 top",
+        ),
+        (
+            "push_the_plate_to_the_front_of_the_stove",
+            "plate 1 in stove front region",
+        ),
+        (
+            "put_the_cream_cheese_in_the_bowl",
+            "cream cheese 1 on bowl 1",
+        ),
         ("turn_on_the_stove", "turn on stove 1"),
         ("put_the_wine_bottle_on_the_rack", "bottle 1 on rack 1 top"),
     ];
@@ -439,6 +552,28 @@ fn unsupported_goal_shapes_are_errors() {
         assert!(GoalTracker::new(&p).is_err(), "{goal}");
     }
     // LIBERO unpacks the top-level And: a single Sequence inside it is the goal.
-    let p = sim::task::parse(&format!("{head}(:goal (And (Sequence (And (On a b)) (And (On b a))))))")).unwrap();
+    let p = sim::task::parse(&format!(
+        "{head}(:goal (And (Sequence (And (On a b)) (And (On b a))))))"
+    ))
+    .unwrap();
     assert_eq!(GoalTracker::new(&p).unwrap().goal_len(), 2);
+}
+
+#[test]
+fn or_branches_of_different_lengths_follow_upstream() {
+    // Branch 3 of this fixture is a single subgoal while goal_len comes from branch 1 (2 subgoals):
+    // completing branch 3 makes the env `done`, and tiered credit is 1/2, as upstream computes it.
+    let text = include_str!("fixtures/bddl/libero_mem_nested_goal.bddl");
+    let mut t = GoalTracker::new(&sim::task::parse(text).unwrap()).unwrap();
+    assert_eq!(t.goal_len(), 2);
+    let p = run(
+        &mut t,
+        &Trace::default().hold(&[], 6).hold(&[on(B2, "plate_2")], 8),
+    );
+    // Three consistent branches each count the false steps: nonlive passes 15 after 6 steps.
+    assert_eq!(appends(&p), [12]);
+    assert!(p[12].done && !p[11].done);
+    assert_eq!(p[12].tiered(), 0.5);
+    assert_eq!(t.satisfied_texts(), ["one: bowl 2 on plate 2"]);
+    assert_eq!(t.pending_text(), None);
 }

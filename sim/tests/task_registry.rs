@@ -13,7 +13,11 @@ fn twenty_tasks_in_benchmark_order() {
     assert_eq!(ids[10], "libero_goal/open_the_middle_drawer_of_the_cabinet");
     assert_eq!(ids[19], "libero_goal/put_the_wine_bottle_on_the_rack");
     for t in &tasks {
-        let class = if t.suite == Suite::LiberoMem { ProblemClass::KitchenTabletop } else { ProblemClass::Tabletop };
+        let class = if t.suite == Suite::LiberoMem {
+            ProblemClass::KitchenTabletop
+        } else {
+            ProblemClass::Tabletop
+        };
         assert_eq!(t.problem.problem_class, class, "{}", t.id);
         // The embedded text is what was parsed, and it round-trips through the printer.
         let again = sim::task::parse(&sim::task::print(&t.problem)).unwrap();
@@ -26,14 +30,42 @@ fn libero_mem_budgets_goal_lengths_and_instructions() {
     let want = [
         (200, 1, "pick up the bowl and place it back on the plate"),
         (290, 1, "lift the bottle and put it down on the plate"),
-        (320, 3, "lift the bowl and place it back on the plate 3 times"),
-        (370, 3, "pick up the bottle and put it down the plate 3 times"),
-        (450, 5, "lift the bowl and place it back on the plate 5 times"),
+        (
+            320,
+            3,
+            "lift the bowl and place it back on the plate 3 times",
+        ),
+        (
+            370,
+            3,
+            "pick up the bottle and put it down the plate 3 times",
+        ),
+        (
+            450,
+            5,
+            "lift the bowl and place it back on the plate 5 times",
+        ),
         (655, 7, "pick up the bowl and place it on the plate 7 times"),
-        (480, 3, "swap the 2 bowls on their plates using the empty plate"),
-        (675, 4, "rotate the 3 bowls on their plates from left to right using the empty plate"),
-        (390, 2, "put the cream cheese in the nearest basket and place that basket in the center"),
-        (390, 2, "put the cream cheese in the nearest basket and place the empty basket in the center"),
+        (
+            480,
+            3,
+            "swap the 2 bowls on their plates using the empty plate",
+        ),
+        (
+            675,
+            4,
+            "rotate the 3 bowls on their plates from left to right using the empty plate",
+        ),
+        (
+            390,
+            2,
+            "put the cream cheese in the nearest basket and place that basket in the center",
+        ),
+        (
+            390,
+            2,
+            "put the cream cheese in the nearest basket and place the empty basket in the center",
+        ),
     ];
     for (i, (steps, len, instr)) in want.iter().enumerate() {
         let n = i + 1;
@@ -52,12 +84,17 @@ fn libero_mem_budgets_goal_lengths_and_instructions() {
 fn libero_goal_tasks_match_the_tsv() {
     let tsv = include_str!("../../../shared/spec/libero_goal_tasks.tsv");
     let mut rows = 0;
-    for line in tsv.lines().filter(|l| !l.starts_with('#') && !l.starts_with("index")) {
+    for line in tsv
+        .lines()
+        .filter(|l| !l.starts_with('#') && !l.starts_with("index"))
+    {
         let f: Vec<&str> = line.split('\t').collect();
         let t = registry::resolve(&format!("libero_goal/{}", f[1])).unwrap();
         assert_eq!(t.instruction, f[2]);
         assert_eq!(t.task_language, f[2]);
-        let goal = sim::task::parse(&t.bddl_text.replace(&goal_text(&t.bddl_text), f[3])).unwrap().goal;
+        let goal = sim::task::parse(&t.bddl_text.replace(&goal_text(&t.bddl_text), f[3]))
+            .unwrap()
+            .goal;
         assert_eq!(t.problem.goal, goal, "{}", f[1]);
         assert_eq!(t.bddl_language, f[4].to_lowercase());
         assert_eq!(t.problem.language_raw, f[4]);
@@ -78,7 +115,11 @@ fn goal_text(bddl: &str) -> String {
 fn libero_goal_scene_is_the_shared_one() {
     let t = registry::resolve("libero_goal/open_the_top_drawer_and_put_the_bowl_inside").unwrap();
     let p = &t.problem;
-    let fixtures: Vec<(&str, &str)> = p.fixtures.iter().map(|i| (i.name.as_str(), i.category.as_str())).collect();
+    let fixtures: Vec<(&str, &str)> = p
+        .fixtures
+        .iter()
+        .map(|i| (i.name.as_str(), i.category.as_str()))
+        .collect();
     assert_eq!(
         fixtures,
         [
@@ -89,13 +130,30 @@ fn libero_goal_scene_is_the_shared_one() {
         ]
     );
     let objects: Vec<&str> = p.objects.iter().map(|i| i.name.as_str()).collect();
-    assert_eq!(objects, ["akita_black_bowl_1", "cream_cheese_1", "wine_bottle_1", "plate_1"]);
+    assert_eq!(
+        objects,
+        [
+            "akita_black_bowl_1",
+            "cream_cheese_1",
+            "wine_bottle_1",
+            "plate_1"
+        ]
+    );
     assert_eq!(p.init.len(), 7);
-    assert_eq!(p.obj_of_interest, ["akita_black_bowl_1", "wooden_cabinet_1_top_region"]);
+    assert_eq!(
+        p.obj_of_interest,
+        ["akita_black_bowl_1", "wooden_cabinet_1_top_region"]
+    );
     let front = p.region("main_table_stove_front_region").unwrap();
     assert!((front.ranges[0][0] + 0.09).abs() < 1e-12 && (front.ranges[0][3] - 0.25).abs() < 1e-12);
-    assert_eq!(p.region("main_table_cabinet_region").unwrap().yaw_rotation, Some([std::f64::consts::PI; 2]));
-    assert_eq!(p.region("main_table_plate_region").unwrap().yaw_rotation, None);
+    assert_eq!(
+        p.region("main_table_cabinet_region").unwrap().yaw_rotation,
+        Some([std::f64::consts::PI; 2])
+    );
+    assert_eq!(
+        p.region("main_table_plate_region").unwrap().yaw_rotation,
+        None
+    );
     assert!(p.region("bowl_drainer_1_right_region").is_some());
 }
 
@@ -112,22 +170,45 @@ fn libero_mem_scenes() {
     ] {
         assert!(keys.iter().any(|x| x == k), "{k} missing from {keys:?}");
     }
-    assert_eq!(t1.region("kitchen_table_plate_2_region").unwrap().ranges, [[-0.25, 0.05, 0.12, 0.20]]);
+    assert_eq!(
+        t1.region("kitchen_table_plate_2_region").unwrap().ranges,
+        [[-0.25, 0.05, 0.12, 0.20]]
+    );
     let objects: Vec<&str> = t1.objects.iter().map(|i| i.name.as_str()).collect();
-    assert_eq!(objects, ["akita_black_bowl_1", "wine_bottle_1", "plate_1", "plate_2", "plate_3"]);
+    assert_eq!(
+        objects,
+        [
+            "akita_black_bowl_1",
+            "wine_bottle_1",
+            "plate_1",
+            "plate_2",
+            "plate_3"
+        ]
+    );
     let init: Vec<String> = t1.init.iter().map(|a| a.to_string()).collect();
     assert!(init.contains(&"(On akita_black_bowl_1 plate_1)".to_string()));
     assert!(init.contains(&"(On wine_bottle_1 plate_2)".to_string()));
 
     let t8 = registry::resolve("t8").unwrap().problem;
     assert_eq!(t8.objects.len(), 7);
-    assert_eq!(t8.region("kitchen_table_plate_4_region").unwrap().ranges, [[-0.25, -0.15, 0.10, 0.25]]);
+    assert_eq!(
+        t8.region("kitchen_table_plate_4_region").unwrap().ranges,
+        [[-0.25, -0.15, 0.10, 0.25]]
+    );
 
     let t9 = registry::resolve("t9").unwrap().problem;
     assert_eq!(t9.fixtures.len(), 1);
-    assert_eq!(t9.region("kitchen_table_the_center").unwrap().ranges, [[-0.10, -0.17, 0.25, 0.20]]);
-    assert_eq!(t9.region("basket_2_contain_region").unwrap().target, "basket_2");
-    let Goal::Or(branches) = &t9.goal else { panic!("T9 is an Or") };
+    assert_eq!(
+        t9.region("kitchen_table_the_center").unwrap().ranges,
+        [[-0.10, -0.17, 0.25, 0.20]]
+    );
+    assert_eq!(
+        t9.region("basket_2_contain_region").unwrap().target,
+        "basket_2"
+    );
+    let Goal::Or(branches) = &t9.goal else {
+        panic!("T9 is an Or")
+    };
     assert_eq!(branches.len(), 2);
 }
 
@@ -137,21 +218,44 @@ fn repetitions_scale_the_sequence() {
     assert_eq!(t.id, "libero_mem/t3@12");
     assert_eq!(t.goal_len, 12);
     assert_eq!(t.repeats, Some(12));
-    assert_eq!(t.instruction, "lift the bowl and place it back on the plate 12 times");
-    assert_eq!(t.task_language, "3 lift the bowl and place it back on the plate 12 times");
-    let Goal::Sequence(s) = &t.problem.goal else { panic!() };
+    assert_eq!(
+        t.instruction,
+        "lift the bowl and place it back on the plate 12 times"
+    );
+    assert_eq!(
+        t.task_language,
+        "3 lift the bowl and place it back on the plate 12 times"
+    );
+    let Goal::Sequence(s) = &t.problem.goal else {
+        panic!()
+    };
     assert_eq!(s.len(), 12);
     // The generated text is valid BDDL describing the same problem.
     assert_eq!(sim::task::parse(&t.bddl_text).unwrap(), t.problem);
     assert_eq!(t.tracker().goal_len(), 12);
     // Budgets: shipped points exactly, interpolated between, extrapolated beyond.
-    assert_eq!(registry::resolve_with_repeats("t3", 3).unwrap(), registry::resolve("t3").unwrap());
-    assert_eq!(registry::resolve_with_repeats("t1", 7).unwrap().max_steps, 655);
-    assert_eq!(registry::resolve_with_repeats("t1", 2).unwrap().max_steps, 260);
+    assert_eq!(
+        registry::resolve_with_repeats("t3", 3).unwrap(),
+        registry::resolve("t3").unwrap()
+    );
+    assert_eq!(
+        registry::resolve_with_repeats("t1", 7).unwrap().max_steps,
+        655
+    );
+    assert_eq!(
+        registry::resolve_with_repeats("t1", 2).unwrap().max_steps,
+        260
+    );
     assert_eq!(registry::resolve("t6@8").unwrap().max_steps, 758);
     assert_eq!(registry::resolve("t4@5").unwrap().max_steps, 450);
-    assert_eq!(registry::resolve("t2@3").unwrap().instruction, "lift the bottle and put it down on the plate 3 times");
-    assert_eq!(registry::resolve("t5@1").unwrap().instruction, "lift the bowl and place it back on the plate");
+    assert_eq!(
+        registry::resolve("t2@3").unwrap().instruction,
+        "lift the bottle and put it down on the plate 3 times"
+    );
+    assert_eq!(
+        registry::resolve("t5@1").unwrap().instruction,
+        "lift the bowl and place it back on the plate"
+    );
 }
 
 #[test]
@@ -167,9 +271,22 @@ fn bad_ids_and_counts() {
         let e = registry::resolve(bad).unwrap_err();
         assert!(matches!(e, TaskError::BadRepeat { .. }), "{bad}: {e}");
     }
-    assert!(registry::resolve("t3@0").unwrap_err().to_string().contains("≥ 1"));
-    assert!(registry::resolve("t7@3").unwrap_err().to_string().contains("t1–t6"));
-    assert!(matches!(registry::resolve_with_repeats("t9", 2), Err(TaskError::BadRepeat { .. })));
+    assert!(
+        registry::resolve("t3@0")
+            .unwrap_err()
+            .to_string()
+            .contains("≥ 1")
+    );
+    assert!(
+        registry::resolve("t7@3")
+            .unwrap_err()
+            .to_string()
+            .contains("t1–t6")
+    );
+    assert!(matches!(
+        registry::resolve_with_repeats("t9", 2),
+        Err(TaskError::BadRepeat { .. })
+    ));
 }
 
 #[test]
@@ -177,7 +294,13 @@ fn user_files() {
     let dir = std::env::temp_dir().join(format!("sim-task-registry-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
     let path = dir.join("KITCHEN_SCENE3_turn_on_the_stove.bddl");
-    std::fs::write(&path, registry::resolve("libero_goal/turn_on_the_stove").unwrap().bddl_text).unwrap();
+    std::fs::write(
+        &path,
+        registry::resolve("libero_goal/turn_on_the_stove")
+            .unwrap()
+            .bddl_text,
+    )
+    .unwrap();
     let t = registry::resolve(path.to_str().unwrap()).unwrap();
     assert_eq!(t.suite, Suite::User);
     assert_eq!(t.instruction, "turn on the stove");
@@ -189,9 +312,16 @@ fn user_files() {
     assert!(e.to_string().contains("nope.bddl"), "{e}");
 
     let broken = dir.join("broken.bddl");
-    std::fs::write(&broken, "(define (problem LIBERO_Tabletop_Manipulation)\n  (:goal (On a b))\n").unwrap();
+    std::fs::write(
+        &broken,
+        "(define (problem LIBERO_Tabletop_Manipulation)\n  (:goal (On a b))\n",
+    )
+    .unwrap();
     let e = registry::resolve(broken.to_str().unwrap()).unwrap_err();
     let msg = e.to_string();
-    assert!(msg.starts_with(&format!("{}:1:1: ", broken.display())), "{msg}");
+    assert!(
+        msg.starts_with(&format!("{}:1:1: ", broken.display())),
+        "{msg}"
+    );
     std::fs::remove_dir_all(&dir).unwrap();
 }

@@ -24,7 +24,9 @@
 //! An **Or** node visits branches in file order, skips a branch unless the atoms already satisfied are a
 //! subset of the branch's atoms, and returns true at the first branch whose Sequence returns true. All
 //! branches share one satisfied list and one pair of counters, so before a branch is committed one
-//! `inc` check can bump the counters once per consistent branch — as upstream.
+//! `inc` check can bump the counters once per consistent branch — as upstream. The goal length is the
+//! first branch's length even when branches differ (upstream `get_goal_sequence_len()`), so tiered credit
+//! follows upstream there too; `done` means the branch that returned true is complete.
 //!
 //! Timing. Upstream checks every control step three times: twice without `inc` inside `env.step`
 //! (`reward()`, where appends normally happen, and `done`), then once with `inc` at the top of the
@@ -58,7 +60,11 @@ pub struct Debounce {
 
 impl Default for Debounce {
     fn default() -> Debounce {
-        Debounce { min_true: 5, min_false: 15, overshoot_false: 5 }
+        Debounce {
+            min_true: 5,
+            min_false: 15,
+            overshoot_false: 5,
+        }
     }
 }
 
@@ -153,33 +159,36 @@ impl GoalTracker {
     /// (as upstream). Prefer [`step`](Self::step), which runs the checks of one control step.
     pub fn check(&mut self, oracle: &mut dyn FnMut(&Atom) -> bool, inc: bool) -> bool {
         let d = self.debounce;
-        let goal_len = self.goal_len();
         let st = &mut self.state;
-        let r = match &self.plan {
+        // `r` is upstream's return value; `done` additionally requires that the sequence which returned
+        // it is complete (an append of an intermediate subgoal also returns true).
+        let (r, done) = match &self.plan {
             Plan::Plain(atoms) => {
                 let r = conj(atoms, oracle);
                 if r && st.satisfied.is_empty() {
                     st.satisfied.push(atoms.clone());
                 }
-                r
+                (r, r)
             }
-            Plan::Sequence(seq) => eval_sequence(st, seq, d, oracle, inc),
+            Plan::Sequence(seq) => {
+                let r = eval_sequence(st, seq, d, oracle, inc);
+                (r, r && st.satisfied.len() >= seq.len())
+            }
             Plan::Or(branches) => {
-                let mut r = false;
+                let mut out = (false, false);
                 for b in branches {
                     if consistent(&st.satisfied, b) && eval_sequence(st, b, d, oracle, inc) {
-                        r = true;
+                        out = (true, st.satisfied.len() >= b.len());
                         break;
                     }
                 }
-                r
+                out
             }
         };
-        // Keep the flat atom list in step with the satisfied subgoals.
         if self.satisfied_atoms.len() != st.satisfied.iter().map(Vec::len).sum::<usize>() {
             self.satisfied_atoms = st.satisfied.iter().flatten().cloned().collect();
         }
-        st.last_done = r && st.satisfied.len() >= goal_len;
+        st.last_done = done;
         r
     }
 
@@ -199,18 +208,13 @@ impl GoalTracker {
         };
         self.check(&mut memo, false);
         self.check(&mut memo, true);
-        let done = self.state.last_done;
         Progress {
-            done,
+            done: self.state.last_done,
             appended: self.state.satisfied.len() > before,
             satisfied: self.state.satisfied.len(),
             goal_len: self.goal_len(),
             failed: self.state.overshot,
         }
-    }
-
-    fn completed_inner(&self) -> bool {
-        self.state.satisfied.len() >= self.goal_len()
     }
 
     /// Atoms of the satisfied subgoals, in the order they were satisfied (one atom per subgoal for the
@@ -247,7 +251,7 @@ impl GoalTracker {
 
     /// Every subgoal has been satisfied at some point (tiered credit 1), whether or not it still holds.
     pub fn completed(&self) -> bool {
-        self.completed_inner()
+        self.state.satisfied.len() >= self.goal_len()
     }
 
     /// Over-repetition after completion (the overshoot flag); stays set until [`reset`](Self::reset).
@@ -289,7 +293,11 @@ impl GoalTracker {
 
     /// A subgoal (conjunction) as text, atoms joined by " and ".
     pub fn subgoal_text(&self, atoms: &[Atom]) -> String {
-        atoms.iter().map(|a| self.namer.atom(a)).collect::<Vec<_>>().join(" and ")
+        atoms
+            .iter()
+            .map(|a| self.namer.atom(a))
+            .collect::<Vec<_>>()
+            .join(" and ")
     }
 
     /// One atom as text, e.g. `"cream cheese 1 in basket 2"`, `"basket 1 in center"`, `"open cabinet 1 middle"`.
@@ -363,7 +371,9 @@ fn plan(goal: &Goal) -> Result<Plan, GoalError> {
         }
         // LIBERO unpacks the top-level And; a single Sequence/Or inside it is the goal.
         Goal::And(v) if v.len() == 1 => plan(&v[0]),
-        Goal::And(_) => Err(GoalError("a top-level `And` may hold atoms, or one `Sequence`/`Or`".into())),
+        Goal::And(_) => Err(GoalError(
+            "a top-level `And` may hold atoms, or one `Sequence`/`Or`".into(),
+        )),
         Goal::Sequence(v) => Ok(Plan::Sequence(sequence(v)?)),
         Goal::Or(branches) => {
             if branches.is_empty() {
@@ -400,21 +410,45 @@ fn sequence(v: &[Goal]) -> Result<Vec<Subgoal>, GoalError> {
 fn subgoal(g: &Goal) -> Result<Subgoal, GoalError> {
     match g {
         Goal::Atom(a) => Ok(vec![a.clone()]),
-        Goal::And(v) if !v.is_empty() && v.iter().all(|g| matches!(g, Goal::Atom(_))) => Ok(atoms_of(v)),
-        _ => Err(GoalError("a subgoal must be an atom or `(And atom...)`".into())),
+        Goal::And(v) if !v.is_empty() && v.iter().all(|g| matches!(g, Goal::Atom(_))) => {
+            Ok(atoms_of(v))
+        }
+        _ => Err(GoalError(
+            "a subgoal must be an atom or `(And atom...)`".into(),
+        )),
     }
 }
 
 /// Ordinals as upstream writes them ("one" … "ten"), extended past ten.
 fn ordinal(n: usize) -> String {
     const ONES: [&str; 20] = [
-        "zero", "one", "two", "three", "four", "five", "six", "seven", "eight", "nine", "ten", "eleven", "twelve",
-        "thirteen", "fourteen", "fifteen", "sixteen", "seventeen", "eighteen", "nineteen",
+        "zero",
+        "one",
+        "two",
+        "three",
+        "four",
+        "five",
+        "six",
+        "seven",
+        "eight",
+        "nine",
+        "ten",
+        "eleven",
+        "twelve",
+        "thirteen",
+        "fourteen",
+        "fifteen",
+        "sixteen",
+        "seventeen",
+        "eighteen",
+        "nineteen",
     ];
-    const TENS: [&str; 10] = ["", "", "twenty", "thirty", "forty", "fifty", "sixty", "seventy", "eighty", "ninety"];
+    const TENS: [&str; 10] = [
+        "", "", "twenty", "thirty", "forty", "fifty", "sixty", "seventy", "eighty", "ninety",
+    ];
     match n {
         0..20 => ONES[n].to_string(),
-        20..100 if n % 10 == 0 => TENS[n / 10].to_string(),
+        20..100 if n.is_multiple_of(10) => TENS[n / 10].to_string(),
         20..100 => format!("{}-{}", TENS[n / 10], ONES[n % 10]),
         _ => n.to_string(),
     }
@@ -438,31 +472,49 @@ impl Namer {
             .filter(|n| p.is_workspace(n))
             .collect();
         Namer {
-            categories: p.instances().map(|i| (i.name.clone(), i.category.clone())).collect(),
-            regions: p.regions.iter().map(|r| (r.key(), (r.target.clone(), r.name.clone()))).collect(),
+            categories: p
+                .instances()
+                .map(|i| (i.name.clone(), i.category.clone()))
+                .collect(),
+            regions: p
+                .regions
+                .iter()
+                .map(|r| (r.key(), (r.target.clone(), r.name.clone())))
+                .collect(),
             workspaces,
         }
     }
 
     fn is_workspace_region(&self, key: &str) -> bool {
-        self.regions.get(key).is_some_and(|(t, _)| self.workspaces.contains(t))
+        self.regions
+            .get(key)
+            .is_some_and(|(t, _)| self.workspaces.contains(t))
     }
 
     fn entity(&self, name: &str) -> String {
         if let Some(cat) = self.categories.get(name) {
-            if let Some(rest) = name.strip_prefix(cat.as_str()).and_then(|r| r.strip_prefix('_')) {
+            if let Some(rest) = name
+                .strip_prefix(cat.as_str())
+                .and_then(|r| r.strip_prefix('_'))
+            {
                 return format!("{} {}", short_category(cat), rest.replace('_', " "));
             }
             return name.replace('_', " ");
         }
         if let Some((target, rname)) = self.regions.get(name) {
             if self.workspaces.contains(target) {
-                return rname.strip_prefix("the_").unwrap_or(rname).replace('_', " ");
+                return rname
+                    .strip_prefix("the_")
+                    .unwrap_or(rname)
+                    .replace('_', " ");
             }
             let t = self.entity(target);
             return match rname.as_str() {
                 "contain_region" | "cook_region" => t,
-                r => format!("{t} {}", r.strip_suffix("_region").unwrap_or(r).replace('_', " ")),
+                r => format!(
+                    "{t} {}",
+                    r.strip_suffix("_region").unwrap_or(r).replace('_', " ")
+                ),
             };
         }
         name.replace('_', " ")
@@ -478,7 +530,7 @@ impl Namer {
             ("turnon", [x]) => format!("turn on {x}"),
             ("turnoff", [x]) => format!("turn off {x}"),
             ("up", [x]) => format!("{x} up"),
-            (p, e) if e.is_empty() => p.to_string(),
+            (p, []) => p.to_string(),
             (p, e) => format!("{p} {}", e.join(" ")),
         }
     }

@@ -8,6 +8,8 @@ pub mod bddl;
 pub mod goal;
 pub mod registry;
 
-pub use registry::{Suite, TaskError, TaskSpec, list, resolve, resolve_with_repeats};
+pub use bddl::{
+    Atom, BddlError, Goal, Instance, Problem, ProblemClass, Region, Span, parse, parse_named, print,
+};
 pub use goal::{Debounce, GoalError, GoalTracker, Progress};
-pub use bddl::{Atom, BddlError, Goal, Instance, Problem, ProblemClass, Region, Span, parse, parse_named, print};
+pub use registry::{Suite, TaskError, TaskSpec, list, resolve, resolve_with_repeats};

@@ -135,8 +135,12 @@ struct Family {
     budgets: &'static [(usize, usize)],
 }
 
-const BOWL: Family = Family { budgets: &[(1, 200), (3, 320), (5, 450), (7, 655)] };
-const BOTTLE: Family = Family { budgets: &[(1, 290), (3, 370)] };
+const BOWL: Family = Family {
+    budgets: &[(1, 200), (3, 320), (5, 450), (7, 655)],
+};
+const BOTTLE: Family = Family {
+    budgets: &[(1, 290), (3, 370)],
+};
 
 struct Shipped {
     short: &'static str,
@@ -175,13 +179,48 @@ macro_rules! goal {
 
 /// The 20 shipped tasks in benchmark order (libero_mem task order 22, then libero_goal order 0).
 static SHIPPED: [Shipped; 20] = [
-    mem!("1", "KITCHEN_SCENE1_1_pick_up_the_bowl_and_place_it_back_on_the_plate", 200, Some((&BOWL, 1))),
-    mem!("2", "KITCHEN_SCENE1_2_lift_the_bottle_and_put_it_down_on_the_plate", 290, Some((&BOTTLE, 1))),
-    mem!("3", "KITCHEN_SCENE1_3_lift_the_bowl_and_place_it_back_on_the_plate_3_times", 320, Some((&BOWL, 3))),
-    mem!("4", "KITCHEN_SCENE1_4_pick_up_the_bottle_and_put_it_down_the_plate_3_times", 370, Some((&BOTTLE, 3))),
-    mem!("5", "KITCHEN_SCENE1_5_lift_the_bowl_and_place_it_back_on_the_plate_5_times", 450, Some((&BOWL, 5))),
-    mem!("6", "KITCHEN_SCENE1_6_pick_up_the_bowl_and_place_it_on_the_plate_7_times", 655, Some((&BOWL, 7))),
-    mem!("7", "KITCHEN_SCENE1_7_swap_the_2_bowls_on_their_plates_using_the_empty_plate", 480, None),
+    mem!(
+        "1",
+        "KITCHEN_SCENE1_1_pick_up_the_bowl_and_place_it_back_on_the_plate",
+        200,
+        Some((&BOWL, 1))
+    ),
+    mem!(
+        "2",
+        "KITCHEN_SCENE1_2_lift_the_bottle_and_put_it_down_on_the_plate",
+        290,
+        Some((&BOTTLE, 1))
+    ),
+    mem!(
+        "3",
+        "KITCHEN_SCENE1_3_lift_the_bowl_and_place_it_back_on_the_plate_3_times",
+        320,
+        Some((&BOWL, 3))
+    ),
+    mem!(
+        "4",
+        "KITCHEN_SCENE1_4_pick_up_the_bottle_and_put_it_down_the_plate_3_times",
+        370,
+        Some((&BOTTLE, 3))
+    ),
+    mem!(
+        "5",
+        "KITCHEN_SCENE1_5_lift_the_bowl_and_place_it_back_on_the_plate_5_times",
+        450,
+        Some((&BOWL, 5))
+    ),
+    mem!(
+        "6",
+        "KITCHEN_SCENE1_6_pick_up_the_bowl_and_place_it_on_the_plate_7_times",
+        655,
+        Some((&BOWL, 7))
+    ),
+    mem!(
+        "7",
+        "KITCHEN_SCENE1_7_swap_the_2_bowls_on_their_plates_using_the_empty_plate",
+        480,
+        None
+    ),
     mem!(
         "8",
         "KITCHEN_SCENE1_8_rotate_the_3_bowls_on_their_plates_from_left_to_right_using_the_empty_plate",
@@ -222,8 +261,11 @@ impl Shipped {
     }
 
     fn spec(&self) -> TaskSpec {
-        let problem = bddl::parse_named(&self.path(), self.text).expect("shipped BDDL files parse (tested)");
-        let goal_len = GoalTracker::new(&problem).expect("shipped goals are supported (tested)").goal_len();
+        let problem =
+            bddl::parse_named(&self.path(), self.text).expect("shipped BDDL files parse (tested)");
+        let goal_len = GoalTracker::new(&problem)
+            .expect("shipped goals are supported (tested)")
+            .goal_len();
         let task_language = language_from_file_stem(self.name);
         TaskSpec {
             id: self.id(),
@@ -252,8 +294,15 @@ impl Shipped {
         };
         let mut problem = base.problem.clone();
         problem.goal = Goal::Sequence(vec![subgoals[0].clone(); n]);
-        let stem = base.bddl_language.strip_suffix(&format!(" {native} times")).unwrap_or(&base.bddl_language);
-        let language = if n == 1 { stem.to_string() } else { format!("{stem} {n} times") };
+        let stem = base
+            .bddl_language
+            .strip_suffix(&format!(" {native} times"))
+            .unwrap_or(&base.bddl_language);
+        let language = if n == 1 {
+            stem.to_string()
+        } else {
+            format!("{stem} {n} times")
+        };
         problem.language = language.clone();
         problem.language_raw = language.clone();
         let number = self.short.trim_start_matches('t');
@@ -278,7 +327,10 @@ impl Shipped {
 /// segment's slope, rounded up.
 fn family_budget(f: &Family, n: usize) -> usize {
     let pts = f.budgets;
-    let seg = pts.windows(2).find(|w| n <= w[1].0).unwrap_or(&pts[pts.len() - 2..]);
+    let seg = pts
+        .windows(2)
+        .find(|w| n <= w[1].0)
+        .unwrap_or(&pts[pts.len() - 2..]);
     let ((x0, y0), (x1, y1)) = (seg[0], seg[1]);
     let slope = (y1 as f64 - y0 as f64) / (x1 as f64 - x0 as f64);
     (y0 as f64 + slope * (n as f64 - x0 as f64)).ceil() as usize
@@ -294,7 +346,10 @@ pub fn language_from_file_stem(stem: &str) -> String {
         let after = stem[i + 5..].trim_start_matches(|c: char| c.is_ascii_digit());
         rest = after.strip_prefix('_').unwrap_or(after);
     }
-    rest.split('_').filter(|w| !w.is_empty()).collect::<Vec<_>>().join(" ")
+    rest.split('_')
+        .filter(|w| !w.is_empty())
+        .collect::<Vec<_>>()
+        .join(" ")
 }
 
 /// Drops a leading all-digit word, as upstream `get_libero_env` does for LIBERO-Mem task names.
@@ -317,7 +372,9 @@ pub fn known_ids() -> Vec<String> {
 
 fn find(id: &str) -> Option<&'static Shipped> {
     let id = id.to_lowercase();
-    SHIPPED.iter().find(|s| s.id() == id || (s.suite == Suite::LiberoMem && s.short == id))
+    SHIPPED
+        .iter()
+        .find(|s| s.id() == id || (s.suite == Suite::LiberoMem && s.short == id))
 }
 
 /// Resolves an id (`t3`, `libero_mem/t3`, `t3@12`, `libero_goal/turn_on_the_stove`) or a path to a user's
@@ -332,20 +389,28 @@ pub fn resolve(id_or_path: &str) -> Result<TaskSpec, TaskError> {
     {
         let n = count.parse::<usize>().map_err(|_| TaskError::BadRepeat {
             id: s.to_string(),
-            message: format!("bad repetition count `{count}`: expected a whole number ≥ 1, as in `t3@12`"),
+            message: format!(
+                "bad repetition count `{count}`: expected a whole number ≥ 1, as in `t3@12`"
+            ),
         })?;
         return with_repeats(t, s, n);
     }
     if s.ends_with(".bddl") || Path::new(s).is_file() {
         return load_user(s);
     }
-    Err(TaskError::UnknownTask { id: s.to_string(), known: known_ids() })
+    Err(TaskError::UnknownTask {
+        id: s.to_string(),
+        known: known_ids(),
+    })
 }
 
 /// Resolves a family task (T1–T6) with `n` repetitions of its subgoal; `n` equal to the task's own count
 /// gives the shipped task.
 pub fn resolve_with_repeats(id: &str, n: usize) -> Result<TaskSpec, TaskError> {
-    let t = find(id.trim()).ok_or_else(|| TaskError::UnknownTask { id: id.trim().to_string(), known: known_ids() })?;
+    let t = find(id.trim()).ok_or_else(|| TaskError::UnknownTask {
+        id: id.trim().to_string(),
+        known: known_ids(),
+    })?;
     with_repeats(t, id.trim(), n)
 }
 
@@ -370,12 +435,22 @@ fn with_repeats(t: &Shipped, asked: &str, n: usize) -> Result<TaskSpec, TaskErro
 
 /// Loads a user's BDDL file.
 fn load_user(path: &str) -> Result<TaskSpec, TaskError> {
-    let text = std::fs::read_to_string(path).map_err(|source| TaskError::Io { path: path.to_string(), source })?;
+    let text = std::fs::read_to_string(path).map_err(|source| TaskError::Io {
+        path: path.to_string(),
+        source,
+    })?;
     let problem = bddl::parse_named(path, &text)?;
     let goal_len = GoalTracker::new(&problem)
-        .map_err(|source| TaskError::Goal { id: path.to_string(), source })?
+        .map_err(|source| TaskError::Goal {
+            id: path.to_string(),
+            source,
+        })?
         .goal_len();
-    let stem = Path::new(path).file_stem().and_then(|s| s.to_str()).unwrap_or(path).to_string();
+    let stem = Path::new(path)
+        .file_stem()
+        .and_then(|s| s.to_str())
+        .unwrap_or(path)
+        .to_string();
     let task_language = language_from_file_stem(&stem);
     Ok(TaskSpec {
         id: path.to_string(),

@@ -9,7 +9,11 @@ pub(crate) enum Sexp {
     /// A parenthesised list; `open` is the position of its `(`.
     List { items: Vec<Sexp>, open: Span },
     /// A symbol: `text` lowercased, `raw` as written.
-    Sym { text: String, raw: String, span: Span },
+    Sym {
+        text: String,
+        raw: String,
+        span: Span,
+    },
 }
 
 impl Sexp {
@@ -52,7 +56,15 @@ pub(crate) fn read_tree(text: &str) -> Result<Sexp, BddlError> {
     fn flush(word: &mut String, span: Span, stack: &mut [(Vec<Sexp>, Span)], top: &mut Vec<Sexp>) {
         if !word.is_empty() {
             let raw = std::mem::take(word);
-            push(stack, top, Sexp::Sym { text: raw.to_lowercase(), raw, span });
+            push(
+                stack,
+                top,
+                Sexp::Sym {
+                    text: raw.to_lowercase(),
+                    raw,
+                    span,
+                },
+            );
         }
     }
 
@@ -79,7 +91,10 @@ pub(crate) fn read_tree(text: &str) -> Result<Sexp, BddlError> {
                 match stack.pop() {
                     Some((items, open)) => push(&mut stack, &mut top, Sexp::List { items, open }),
                     None => {
-                        return Err(BddlError::at(here, "unbalanced parentheses: this `)` has no matching `(`"));
+                        return Err(BddlError::at(
+                            here,
+                            "unbalanced parentheses: this `)` has no matching `(`",
+                        ));
                     }
                 }
             }
@@ -107,7 +122,10 @@ pub(crate) fn read_tree(text: &str) -> Result<Sexp, BddlError> {
     }
     let mut top = top.into_iter();
     let first = top.next().ok_or_else(|| {
-        BddlError::at(Span { line, col }, "expected `(define (problem ...) ...)`, found the end of the file")
+        BddlError::at(
+            Span { line, col },
+            "expected `(define (problem ...) ...)`, found the end of the file",
+        )
     })?;
     if let Some(second) = top.next() {
         return Err(BddlError::at(

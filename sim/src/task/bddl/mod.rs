@@ -62,7 +62,12 @@ pub struct BddlError {
 
 impl BddlError {
     pub(crate) fn at(span: Span, message: impl Into<String>) -> BddlError {
-        BddlError { file: String::new(), line: span.line, col: span.col, message: message.into() }
+        BddlError {
+            file: String::new(),
+            line: span.line,
+            col: span.col,
+            message: message.into(),
+        }
     }
 
     fn in_file(mut self, file: &str) -> BddlError {
@@ -73,7 +78,11 @@ impl BddlError {
 
 impl fmt::Display for BddlError {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        write!(f, "{}:{}:{}: {}", self.file, self.line, self.col, self.message)
+        write!(
+            f,
+            "{}:{}:{}: {}",
+            self.file, self.line, self.col, self.message
+        )
     }
 }
 
@@ -146,7 +155,9 @@ impl ProblemClass {
     /// Looks a class up case-insensitively, as LIBERO does.
     pub fn from_name(name: &str) -> Option<ProblemClass> {
         let lower = name.to_lowercase();
-        ProblemClass::ALL.into_iter().find(|c| c.name().to_lowercase() == lower)
+        ProblemClass::ALL
+            .into_iter()
+            .find(|c| c.name().to_lowercase() == lower)
     }
 
     /// The workspace fixture whose regions become table sites (`main_table`, `kitchen_table`, …).
@@ -213,7 +224,8 @@ impl Problem {
     /// workspace (`main_table`, `kitchen_table`, `living_room_table`, `study_table`, `floor`,
     /// `coffee_table`).
     pub fn is_workspace(&self, name: &str) -> bool {
-        name == self.problem_class.workspace() || ProblemClass::ALL.iter().any(|c| c.workspace() == name)
+        name == self.problem_class.workspace()
+            || ProblemClass::ALL.iter().any(|c| c.workspace() == name)
     }
 }
 
@@ -306,7 +318,9 @@ impl Goal {
         fn walk<'a>(g: &'a Goal, out: &mut Vec<&'a Atom>) {
             match g {
                 Goal::Atom(a) => out.push(a),
-                Goal::And(v) | Goal::Or(v) | Goal::Sequence(v) => v.iter().for_each(|g| walk(g, out)),
+                Goal::And(v) | Goal::Or(v) | Goal::Sequence(v) => {
+                    v.iter().for_each(|g| walk(g, out))
+                }
             }
         }
         walk(self, &mut out);

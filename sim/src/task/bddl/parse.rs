@@ -29,7 +29,10 @@ fn err(span: Span, msg: impl Into<String>) -> BddlError {
 fn sym<'a>(s: &'a Sexp, expected: &str) -> Result<&'a str> {
     match s {
         Sexp::Sym { text, .. } => Ok(text),
-        other => Err(err(other.span(), format!("expected {expected}, found {}", other.describe()))),
+        other => Err(err(
+            other.span(),
+            format!("expected {expected}, found {}", other.describe()),
+        )),
     }
 }
 
@@ -37,7 +40,10 @@ fn sym<'a>(s: &'a Sexp, expected: &str) -> Result<&'a str> {
 fn list<'a>(s: &'a Sexp, expected: &str) -> Result<&'a [Sexp]> {
     match s {
         Sexp::List { items, .. } => Ok(items),
-        other => Err(err(other.span(), format!("expected {expected}, found {}", other.describe()))),
+        other => Err(err(
+            other.span(),
+            format!("expected {expected}, found {}", other.describe()),
+        )),
     }
 }
 
@@ -46,8 +52,14 @@ fn headed<'a>(s: &'a Sexp, expected: &str) -> Result<(&'a str, &'a [Sexp], Span)
     let items = list(s, expected)?;
     match items.first() {
         Some(Sexp::Sym { text, .. }) => Ok((text, &items[1..], s.span())),
-        Some(other) => Err(err(other.span(), format!("expected {expected}, found {}", other.describe()))),
-        None => Err(err(s.span(), format!("expected {expected}, found an empty list `()`"))),
+        Some(other) => Err(err(
+            other.span(),
+            format!("expected {expected}, found {}", other.describe()),
+        )),
+        None => Err(err(
+            s.span(),
+            format!("expected {expected}, found an empty list `()`"),
+        )),
     }
 }
 
@@ -57,23 +69,51 @@ pub(crate) fn problem(root: &Sexp) -> Result<Problem> {
     let items = list(root, TOP)?;
     match items.first() {
         Some(Sexp::Sym { text, .. }) if text == "define" => {}
-        Some(other) => return Err(err(other.span(), format!("expected {TOP}, found {}", other.describe()))),
-        None => return Err(err(root.span(), format!("expected {TOP}, found an empty list `()`"))),
+        Some(other) => {
+            return Err(err(
+                other.span(),
+                format!("expected {TOP}, found {}", other.describe()),
+            ));
+        }
+        None => {
+            return Err(err(
+                root.span(),
+                format!("expected {TOP}, found an empty list `()`"),
+            ));
+        }
     }
-    let head = items
-        .get(1)
-        .ok_or_else(|| err(root.span(), "expected `(problem <ProblemClass>)` after `define`"))?;
+    let head = items.get(1).ok_or_else(|| {
+        err(
+            root.span(),
+            "expected `(problem <ProblemClass>)` after `define`",
+        )
+    })?;
     let (kw, rest, head_span) = headed(head, "`(problem <ProblemClass>)`")?;
     if kw != "problem" {
-        return Err(err(head_span, format!("expected `(problem <ProblemClass>)`, found {}", head.describe())));
+        return Err(err(
+            head_span,
+            format!(
+                "expected `(problem <ProblemClass>)`, found {}",
+                head.describe()
+            ),
+        ));
     }
     let [class] = rest else {
-        return Err(err(head_span, "expected exactly one problem class in `(problem <ProblemClass>)`"));
+        return Err(err(
+            head_span,
+            "expected exactly one problem class in `(problem <ProblemClass>)`",
+        ));
     };
     let class_name = sym(class, "a problem class name")?;
     let problem_class = ProblemClass::from_name(class_name).ok_or_else(|| {
         let known: Vec<&str> = ProblemClass::ALL.iter().map(|c| c.name()).collect();
-        err(class.span(), format!("unknown problem class `{class_name}`; expected one of {}", known.join(", ")))
+        err(
+            class.span(),
+            format!(
+                "unknown problem class `{class_name}`; expected one of {}",
+                known.join(", ")
+            ),
+        )
     })?;
 
     // Collect sections by name; order does not matter.
@@ -83,13 +123,19 @@ pub(crate) fn problem(root: &Sexp) -> Result<Problem> {
         let Some(known) = SECTIONS.iter().find(|k| **k == name) else {
             return Err(err(
                 span,
-                format!("unknown section `{name}`; expected one of {}", SECTIONS.join(", ")),
+                format!(
+                    "unknown section `{name}`; expected one of {}",
+                    SECTIONS.join(", ")
+                ),
             ));
         };
         if let Some((_, first)) = sections.get(known) {
             return Err(err(
                 span,
-                format!("duplicate section `{name}` (first at line {}, column {})", first.line, first.col),
+                format!(
+                    "duplicate section `{name}` (first at line {}, column {})",
+                    first.line, first.col
+                ),
             ));
         }
         sections.insert(known, (body, span));
@@ -103,7 +149,10 @@ pub(crate) fn problem(root: &Sexp) -> Result<Problem> {
             };
             let d = sym(d, "the domain `robosuite`")?;
             if d != "robosuite" {
-                return Err(err(body[0].span(), format!("expected the domain `robosuite`, found `{d}`")));
+                return Err(err(
+                    body[0].span(),
+                    format!("expected the domain `robosuite`, found `{d}`"),
+                ));
             }
             d.to_string()
         }
@@ -118,7 +167,10 @@ pub(crate) fn problem(root: &Sexp) -> Result<Problem> {
                     language_raw.push(raw.as_str());
                 }
                 other => {
-                    return Err(err(other.span(), format!("expected words, found {}", other.describe())));
+                    return Err(err(
+                        other.span(),
+                        format!("expected words, found {}", other.describe()),
+                    ));
                 }
             }
         }
@@ -133,7 +185,10 @@ pub(crate) fn problem(root: &Sexp) -> Result<Problem> {
             if let Some(first) = names.get(&key) {
                 return Err(err(
                     region.span,
-                    format!("duplicate region key `{key}` (first at line {}, column {})", first.line, first.col),
+                    format!(
+                        "duplicate region key `{key}` (first at line {}, column {})",
+                        first.line, first.col
+                    ),
                 ));
             }
             names.insert(key, region.span);
@@ -165,7 +220,10 @@ pub(crate) fn problem(root: &Sexp) -> Result<Problem> {
         None => return Err(err(root.span(), "missing section `(:goal ...)`")),
         Some((body, span)) => {
             let [g] = body else {
-                return Err(err(*span, "expected exactly one goal expression in `(:goal ...)`"));
+                return Err(err(
+                    *span,
+                    "expected exactly one goal expression in `(:goal ...)`",
+                ));
             };
             goal(g, &names)?
         }
@@ -193,8 +251,10 @@ fn region(s: &Sexp) -> Result<Region> {
     let mut yaw: Option<Option<[f64; 2]>> = None;
     let mut rgba: Option<[f64; 4]> = None;
     for a in attrs {
-        let (key, body, aspan) =
-            headed(a, "a region attribute `(:target ...)`, `(:ranges ...)`, `(:yaw_rotation ...)` or `(:rgba ...)`")?;
+        let (key, body, aspan) = headed(
+            a,
+            "a region attribute `(:target ...)`, `(:ranges ...)`, `(:yaw_rotation ...)` or `(:rgba ...)`",
+        )?;
         let dup = match key {
             ":target" => target.is_some(),
             ":ranges" => ranges.is_some(),
@@ -210,26 +270,41 @@ fn region(s: &Sexp) -> Result<Region> {
             }
         };
         if dup {
-            return Err(err(aspan, format!("duplicate attribute `{key}` in region `{name}`")));
+            return Err(err(
+                aspan,
+                format!("duplicate attribute `{key}` in region `{name}`"),
+            ));
         }
         match key {
             ":target" => {
                 let [t] = body else {
-                    return Err(err(aspan, "expected `(:target <entity>)` with exactly one name"));
+                    return Err(err(
+                        aspan,
+                        "expected `(:target <entity>)` with exactly one name",
+                    ));
                 };
                 target = Some(sym(t, "a target name")?.to_string());
             }
             ":ranges" => {
                 let [rects] = body else {
-                    return Err(err(aspan, "expected `(:ranges ((x_min y_min x_max y_max) ...))`"));
+                    return Err(err(
+                        aspan,
+                        "expected `(:ranges ((x_min y_min x_max y_max) ...))`",
+                    ));
                 };
                 let mut out = Vec::new();
-                for rect in list(rects, "a list of rectangles `((x_min y_min x_max y_max) ...)`")? {
+                for rect in list(
+                    rects,
+                    "a list of rectangles `((x_min y_min x_max y_max) ...)`",
+                )? {
                     let nums = list(rect, "a rectangle `(x_min y_min x_max y_max)`")?;
                     if nums.len() != 4 {
                         return Err(err(
                             rect.span(),
-                            format!("expected 4 numbers `(x_min y_min x_max y_max)`, found {}", nums.len()),
+                            format!(
+                                "expected 4 numbers `(x_min y_min x_max y_max)`, found {}",
+                                nums.len()
+                            ),
                         ));
                     }
                     let mut r = [0.0; 4];
@@ -248,7 +323,10 @@ fn region(s: &Sexp) -> Result<Region> {
                 for p in list(pairs, "a list of yaw pairs `((lo hi) ...)`")? {
                     let v = list(p, "a yaw pair `(lo hi)`")?;
                     if v.len() != 2 {
-                        return Err(err(p.span(), format!("expected a yaw pair `(lo hi)`, found {} values", v.len())));
+                        return Err(err(
+                            p.span(),
+                            format!("expected a yaw pair `(lo hi)`, found {} values", v.len()),
+                        ));
                     }
                     last = Some([expr_value(&v[0])?, expr_value(&v[1])?]);
                 }
@@ -260,7 +338,10 @@ fn region(s: &Sexp) -> Result<Region> {
                 };
                 let nums = list(c, "a colour `(r g b a)`")?;
                 if nums.len() != 4 {
-                    return Err(err(c.span(), format!("expected 4 numbers `(r g b a)`, found {}", nums.len())));
+                    return Err(err(
+                        c.span(),
+                        format!("expected 4 numbers `(r g b a)`, found {}", nums.len()),
+                    ));
                 }
                 let mut v = [0.0; 4];
                 for (slot, n) in v.iter_mut().zip(nums) {
@@ -270,8 +351,12 @@ fn region(s: &Sexp) -> Result<Region> {
             }
         }
     }
-    let target =
-        target.ok_or_else(|| err(span, format!("region `{name}` has no `(:target <entity>)`; expected one")))?;
+    let target = target.ok_or_else(|| {
+        err(
+            span,
+            format!("region `{name}` has no `(:target <entity>)`; expected one"),
+        )
+    })?;
     Ok(Region {
         name: name.to_string(),
         target,
@@ -283,31 +368,48 @@ fn region(s: &Sexp) -> Result<Region> {
 }
 
 /// A PDDL typed list `a b - cat c - cat2 d`; names without a type get `default`.
-fn typed_list(items: &[Sexp], default: &str, names: &mut HashMap<String, Span>) -> Result<Vec<Instance>> {
+fn typed_list(
+    items: &[Sexp],
+    default: &str,
+    names: &mut HashMap<String, Span>,
+) -> Result<Vec<Instance>> {
     let mut out = Vec::new();
     let mut pending: Vec<(&str, Span)> = Vec::new();
     let mut i = 0;
-    let mut declare = |name: &str, span: Span, category: &str, out: &mut Vec<Instance>| -> Result<()> {
-        if let Some(first) = names.get(name) {
-            return Err(err(
-                span,
-                format!("duplicate name `{name}` (first declared at line {}, column {})", first.line, first.col),
-            ));
-        }
-        names.insert(name.to_string(), span);
-        out.push(Instance { name: name.to_string(), category: category.to_string() });
-        Ok(())
-    };
+    let mut declare =
+        |name: &str, span: Span, category: &str, out: &mut Vec<Instance>| -> Result<()> {
+            if let Some(first) = names.get(name) {
+                return Err(err(
+                    span,
+                    format!(
+                        "duplicate name `{name}` (first declared at line {}, column {})",
+                        first.line, first.col
+                    ),
+                ));
+            }
+            names.insert(name.to_string(), span);
+            out.push(Instance {
+                name: name.to_string(),
+                category: category.to_string(),
+            });
+            Ok(())
+        };
     while i < items.len() {
         let s = sym(&items[i], "an instance name or `- <category>`")?;
         if s == "-" {
             let dash = items[i].span();
-            let cat = items
-                .get(i + 1)
-                .ok_or_else(|| err(dash, "expected a category after `-`, found the end of the section"))?;
+            let cat = items.get(i + 1).ok_or_else(|| {
+                err(
+                    dash,
+                    "expected a category after `-`, found the end of the section",
+                )
+            })?;
             let cat = sym(cat, "a category after `-`")?;
             if pending.is_empty() {
-                return Err(err(dash, format!("expected instance names before `- {cat}`")));
+                return Err(err(
+                    dash,
+                    format!("expected instance names before `- {cat}`"),
+                ));
             }
             for (n, span) in pending.drain(..) {
                 declare(n, span, cat, &mut out)?;
@@ -330,7 +432,10 @@ fn known_name(s: &Sexp, names: &HashMap<String, Span>) -> Result<String> {
     if names.contains_key(n) {
         Ok(n.to_string())
     } else {
-        Err(err(s.span(), format!("unknown name `{n}`; expected a declared fixture, object or region key")))
+        Err(err(
+            s.span(),
+            format!("unknown name `{n}`; expected a declared fixture, object or region key"),
+        ))
     }
 }
 
@@ -339,25 +444,55 @@ fn atom(s: &Sexp, names: &HashMap<String, Span>) -> Result<Atom> {
     let (pred, args, span) = headed(s, "an atom `(<predicate> <arg>...)`")?;
     let Some((_, lo, hi)) = PREDICATES.iter().find(|(p, _, _)| *p == pred) else {
         let known: Vec<&str> = PREDICATES.iter().map(|(p, _, _)| *p).collect();
-        return Err(err(span, format!("unknown predicate `{pred}`; expected one of {}", known.join(", "))));
+        return Err(err(
+            span,
+            format!(
+                "unknown predicate `{pred}`; expected one of {}",
+                known.join(", ")
+            ),
+        ));
     };
     if args.len() < *lo || args.len() > *hi {
-        let want = if lo == hi { format!("{lo}") } else { format!("{lo} to {hi}") };
-        return Err(err(span, format!("predicate `{pred}` takes {want} argument(s), found {}", args.len())));
+        let want = if lo == hi {
+            format!("{lo}")
+        } else {
+            format!("{lo} to {hi}")
+        };
+        return Err(err(
+            span,
+            format!(
+                "predicate `{pred}` takes {want} argument(s), found {}",
+                args.len()
+            ),
+        ));
     }
-    let args = args.iter().map(|a| known_name(a, names)).collect::<Result<Vec<_>>>()?;
-    Ok(Atom { predicate: pred.to_string(), args, span })
+    let args = args
+        .iter()
+        .map(|a| known_name(a, names))
+        .collect::<Result<Vec<_>>>()?;
+    Ok(Atom {
+        predicate: pred.to_string(),
+        args,
+        span,
+    })
 }
 
 /// A goal: `(and g...)`, `(or g...)`, `(sequence g...)` or an atom.
 fn goal(s: &Sexp, names: &HashMap<String, Span>) -> Result<Goal> {
-    let (head, rest, span) = headed(s, "a goal `(And ...)`, `(Or ...)`, `(Sequence ...)` or an atom")?;
-    let children = |rest: &[Sexp]| -> Result<Vec<Goal>> { rest.iter().map(|g| goal(g, names)).collect() };
+    let (head, rest, span) = headed(
+        s,
+        "a goal `(And ...)`, `(Or ...)`, `(Sequence ...)` or an atom",
+    )?;
+    let children =
+        |rest: &[Sexp]| -> Result<Vec<Goal>> { rest.iter().map(|g| goal(g, names)).collect() };
     match head {
         "and" => Ok(Goal::And(children(rest)?)),
         "or" => Ok(Goal::Or(children(rest)?)),
         "sequence" => Ok(Goal::Sequence(children(rest)?)),
-        "not" => Err(err(span, "`not` is not supported (LIBERO has no negation); expected `And`, `Or`, `Sequence` or an atom")),
+        "not" => Err(err(
+            span,
+            "`not` is not supported (LIBERO has no negation); expected `And`, `Or`, `Sequence` or an atom",
+        )),
         _ => Ok(Goal::Atom(atom(s, names)?)),
     }
 }
@@ -367,7 +502,10 @@ fn number(s: &Sexp) -> Result<f64> {
     let t = sym(s, "a number")?;
     match t.parse::<f64>() {
         Ok(v) if v.is_finite() => Ok(v),
-        _ => Err(err(s.span(), format!("bad number `{t}`: expected a finite decimal number such as `-0.25`"))),
+        _ => Err(err(
+            s.span(),
+            format!("bad number `{t}`: expected a finite decimal number such as `-0.25`"),
+        )),
     }
 }
 
@@ -379,7 +517,9 @@ fn expr_value(s: &Sexp) -> Result<f64> {
         Some(v) if v.is_finite() => Ok(v),
         _ => Err(err(
             s.span(),
-            format!("bad yaw value `{t}`: expected a number or a simple expression such as `-np.pi/2`"),
+            format!(
+                "bad yaw value `{t}`: expected a number or a simple expression such as `-np.pi/2`"
+            ),
         )),
     }
 }
@@ -452,10 +592,16 @@ pub(crate) fn eval_expr(text: &str) -> Option<f64> {
                     self.i = save;
                 }
             }
-            std::str::from_utf8(&self.s[start..self.i]).ok()?.parse().ok()
+            std::str::from_utf8(&self.s[start..self.i])
+                .ok()?
+                .parse()
+                .ok()
         }
     }
-    let mut p = P { s: text.as_bytes(), i: 0 };
+    let mut p = P {
+        s: text.as_bytes(),
+        i: 0,
+    };
     let v = p.expr()?;
     (p.i == text.len()).then_some(v)
 }

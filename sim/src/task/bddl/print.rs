@@ -22,7 +22,11 @@ pub fn print(p: &Problem) -> String {
     // `write!` into a String cannot fail.
     let _ = writeln!(s, "(define (problem {})", p.problem_class.name());
     let _ = writeln!(s, "  (:domain {})", p.domain);
-    let language = if p.language_raw.to_lowercase() == p.language { &p.language_raw } else { &p.language };
+    let language = if p.language_raw.to_lowercase() == p.language {
+        &p.language_raw
+    } else {
+        &p.language
+    };
     if language.is_empty() {
         s.push_str("  (:language)\n");
     } else {
@@ -41,7 +45,10 @@ pub fn print(p: &Problem) -> String {
             s.push_str("        )\n      )\n");
         }
         if let Some([lo, hi]) = r.yaw_rotation {
-            let _ = writeln!(s, "      (:yaw_rotation (\n          ({lo} {hi})\n        )\n      )");
+            let _ = writeln!(
+                s,
+                "      (:yaw_rotation (\n          ({lo} {hi})\n        )\n      )"
+            );
         }
         if let Some([cr, cg, cb, ca]) = r.rgba {
             let _ = writeln!(s, "      (:rgba ({cr} {cg} {cb} {ca}))");
