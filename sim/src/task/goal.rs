@@ -195,6 +195,10 @@ impl GoalTracker {
     /// One control step, as upstream evaluates it: `env.step`'s checks without `inc` (where appends
     /// happen), then the evaluation loop's `inc = true` check, all on the same predicate values (each atom
     /// is asked of the oracle at most once per step).
+    ///
+    /// Upstream's schedule, reproduced exactly: after `reset`, `set_init_state` and the 20 settle steps,
+    /// call [`reset`](Self::reset), then `step` once on that first state, then `step` after every
+    /// `env.step`. (The first call only counts, since nothing can be appended with zeroed counters.)
     pub fn step(&mut self, oracle: &mut dyn FnMut(&Atom) -> bool) -> Progress {
         let before = self.state.satisfied.len();
         let mut cache: Vec<(Atom, bool)> = Vec::new();

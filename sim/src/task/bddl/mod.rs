@@ -328,6 +328,17 @@ impl Goal {
     }
 }
 
+/// Categories LIBERO does not load as assets because the arena provides them (libero.md §1.1); an
+/// instance of one of these is the workspace (`main_table - table`, `kitchen_table - kitchen_table`, …).
+pub const WORKSPACE_CATEGORIES: [&str; 6] = [
+    "table",
+    "kitchen_table",
+    "living_room_table",
+    "study_table",
+    "floor",
+    "coffee_table",
+];
+
 /// LIBERO's predicate registry (libero.md §2.1) with the least and most arguments each accepts
 /// (`true`/`false` ignore their arguments).
 pub const PREDICATES: [(&str, usize, usize); 10] = [

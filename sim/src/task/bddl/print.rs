@@ -1,6 +1,7 @@
 //! `Problem` → BDDL text in LIBERO's layout, such that `parse(print(p)) == p`.
 //!
-//! Numbers are written with Rust's shortest round-trip formatting, so they read back bit for bit.
+//! Numbers are written with Rust's shortest round-trip formatting (`{:?}`: `0.0`, `-0.25`, `1e-7`), which
+//! Python's `float()` also reads, so they read back bit for bit.
 //! The printer expects names as the parser produces them (lowercase, no whitespace or parentheses).
 
 use std::fmt::Write;
@@ -40,18 +41,18 @@ pub fn print(p: &Problem) -> String {
         if !r.ranges.is_empty() {
             s.push_str("      (:ranges (\n");
             for [a, b, c, d] in &r.ranges {
-                let _ = writeln!(s, "          ({a} {b} {c} {d})");
+                let _ = writeln!(s, "          ({a:?} {b:?} {c:?} {d:?})");
             }
             s.push_str("        )\n      )\n");
         }
         if let Some([lo, hi]) = r.yaw_rotation {
             let _ = writeln!(
                 s,
-                "      (:yaw_rotation (\n          ({lo} {hi})\n        )\n      )"
+                "      (:yaw_rotation (\n          ({lo:?} {hi:?})\n        )\n      )"
             );
         }
         if let Some([cr, cg, cb, ca]) = r.rgba {
-            let _ = writeln!(s, "      (:rgba ({cr} {cg} {cb} {ca}))");
+            let _ = writeln!(s, "      (:rgba ({cr:?} {cg:?} {cb:?} {ca:?}))");
         }
         s.push_str("    )\n");
     }
