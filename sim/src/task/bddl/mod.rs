@@ -18,8 +18,9 @@
 //! Where we are stricter than LIBERO (LIBERO warns, ignores or crashes later): an unknown section, a
 //! duplicated section, region attribute, region key or instance name, a region without `:target`, an
 //! unknown problem class, a domain other than `robosuite`, a predicate outside LIBERO's registry or with
-//! the wrong number of arguments, and an atom argument or `:obj_of_interest` entry that names neither a
-//! declared instance nor a declared region key are all errors. LIBERO lets a later `a - cat` line
+//! the wrong number of arguments, and an atom argument (in `:init` or `:goal`) that names neither a
+//! declared instance nor a declared region key are all errors (`:obj_of_interest`, used only for
+//! visualisation, is not checked). LIBERO lets a later `a - cat` line
 //! replace an earlier line of the same category; we keep every instance, in file order.
 //!
 //! Goals: LIBERO's `(And atom...)` or a single atom, and LIBERO-Mem's `(Sequence g...)`, `(Or g...)` and
