@@ -325,3 +325,24 @@ fn user_files() {
     );
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+#[test]
+fn language_from_file_names() {
+    use registry::{language_from_file_stem as lang, strip_leading_number as strip};
+    assert_eq!(
+        lang("KITCHEN_SCENE10_close_the_top_drawer_of_the_cabinet"),
+        "close the top drawer of the cabinet"
+    );
+    assert_eq!(
+        lang("LIVING_ROOM_SCENE2_pick_up_the_milk"),
+        "pick up the milk"
+    );
+    assert_eq!(
+        lang("put_the_bowl_on_the_plate"),
+        "put the bowl on the plate"
+    );
+    let mem = lang("KITCHEN_SCENE1_10_put_the_cream_cheese_in_the_nearest_basket");
+    assert_eq!(mem, "10 put the cream cheese in the nearest basket");
+    assert_eq!(strip(&mem), "put the cream cheese in the nearest basket");
+    assert_eq!(strip("swap the 2 bowls"), "swap the 2 bowls");
+}
