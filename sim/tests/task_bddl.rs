@@ -69,6 +69,14 @@ fn libero_spatial_tabletop() {
         ("flat_stove_1", 0, None, None)
     );
     assert_eq!(
+        (cook.yaw_or_default(), cook.rgba_or_default()),
+        ([0.0; 2], [0.0, 0.0, 1.0, 0.0])
+    );
+    assert_eq!(
+        p.problem_class.lowercase_name(),
+        "libero_tabletop_manipulation"
+    );
+    assert_eq!(
         p.goal,
         Goal::And(vec![Goal::Atom(Atom::new(
             "on",

@@ -161,6 +161,11 @@ impl ProblemClass {
             .find(|c| c.name().to_lowercase() == lower)
     }
 
+    /// The lowercased name LIBERO matches against, e.g. `libero_tabletop_manipulation`.
+    pub fn lowercase_name(self) -> String {
+        self.name().to_lowercase()
+    }
+
     /// The workspace fixture whose regions become table sites (`main_table`, `kitchen_table`, …).
     pub fn workspace(self) -> &'static str {
         match self {
@@ -253,6 +258,16 @@ impl Region {
     /// `basket_1_contain_region`.
     pub fn key(&self) -> String {
         format!("{}_{}", self.target, self.name)
+    }
+
+    /// The yaw range with LIBERO's default `[0, 0]` when absent.
+    pub fn yaw_or_default(&self) -> [f64; 2] {
+        self.yaw_rotation.unwrap_or([0.0, 0.0])
+    }
+
+    /// The colour with LIBERO's default `0 0 1 0` (invisible) when absent.
+    pub fn rgba_or_default(&self) -> [f64; 4] {
+        self.rgba.unwrap_or([0.0, 0.0, 1.0, 0.0])
     }
 }
 
