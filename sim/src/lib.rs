@@ -10,6 +10,7 @@ pub mod env;
 pub mod mujoco;
 pub mod render;
 pub mod robot;
+pub mod task;
 
 pub use env::{Env, EnvConfig, EnvError, Observation};
 pub mod assets;
