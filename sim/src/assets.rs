@@ -12,7 +12,21 @@
 use std::f64::consts::{FRAC_PI_2, PI};
 use std::fmt::Write;
 
-use crate::robot::{ENV_CONAFFINITY, ENV_CONTYPE};
+/// Collision bits. Movable objects touch everything; a fixture's frame and its moving parts (drawers,
+/// knobs) touch objects and the robot but not each other (a fixture's frame is welded to the world, where
+/// MuJoCo's parent filter does not apply).
+pub mod bits {
+    /// Movable objects: `contype`.
+    pub const OBJECT_TYPE: u32 = 1;
+    /// Movable objects: `conaffinity` (objects, arm, fixture frames, fixture parts).
+    pub const OBJECT_AFFINITY: u32 = 1 | 2 | 4 | 8;
+    /// Fixture frames: `contype`.
+    pub const FRAME_TYPE: u32 = 4;
+    /// Fixture moving parts: `contype`.
+    pub const PART_TYPE: u32 = 8;
+    /// Fixture frames and parts: `conaffinity` (objects, pads and tables; arm links).
+    pub const FIXTURE_AFFINITY: u32 = 1 | 2;
+}
 
 /// Movable object or fixture.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -288,6 +302,8 @@ struct Geoms<'a> {
     friction: &'static str,
     /// Extra attributes (solref/solimp) shared by the asset's geoms.
     contact: &'static str,
+    /// `contype` / `conaffinity`.
+    bits: (u32, u32),
 }
 
 impl Geoms<'_> {
@@ -303,8 +319,8 @@ impl Geoms<'_> {
             self.contact,
             p = self.prefix,
             n = self.n,
-            ct = ENV_CONTYPE,
-            ca = ENV_CONAFFINITY,
+            ct = self.bits.0,
+            ca = self.bits.1,
         );
         self.n += 1;
     }
@@ -360,7 +376,7 @@ fn site(out: &mut String, prefix: &str, name: &str, pos: [f64; 3], quat: [f64; 4
 }
 
 /// LIBERO's collision-geom contact parameters (solref 0.001 is clamped to 2·dt by MuJoCo's refsafe).
-const OBJ_CONTACT: &str = r#"solref="0.004 1" solimp="0.998 0.998 0.001""#;
+const OBJ_CONTACT: &str = r#"solref="0.01 1""#;
 const OBJ_FRICTION: &str = "0.95 0.3 0.1";
 
 /// MJCF body tree for one instance of `def`, named `<instance>_main`, at `pos`/`quat` (world frame).
@@ -406,23 +422,33 @@ fn geoms<'a>(out: &'a mut String, prefix: &'a str, rgba: [f64; 4]) -> Geoms<'a> 
         rgba,
         friction: OBJ_FRICTION,
         contact: OBJ_CONTACT,
+        bits: (bits::OBJECT_TYPE, bits::OBJECT_AFFINITY),
     }
 }
 
-/// Akita black bowl: Ø 0.107 m, 0.05 m tall, origin at the bottom centre, thin flared wall with a rim.
-fn bowl(out: &mut String, p: &str) {
-    let mut g = geoms(out, p, [0.06, 0.06, 0.065, 1.0]);
-    g.cyl([0.0, 0.0, 0.005], 0.036, 0.003, 0.0016);
-    g.ring(16, 0.036, 0.0505, 0.004, 0.050, 0.005, 0.0035);
-    // Rim: a thin lip that fingers can pinch.
-    g.ring(16, 0.0505, 0.0535, 0.048, 0.052, 0.004, 0.0005);
+fn frame_bits(g: &mut Geoms) {
+    g.bits = (bits::FRAME_TYPE, bits::FIXTURE_AFFINITY);
 }
 
-/// Plate: Ø 0.138 m, 0.019 m tall, flat centre and a low rim.
+fn part_bits(g: &mut Geoms) {
+    g.bits = (bits::PART_TYPE, bits::FIXTURE_AFFINITY);
+}
+
+/// Akita black bowl: Ø 0.107 m, 0.05 m tall, origin at the bottom centre, thin flared wall whose top edge
+/// is a rim fingers can pinch. The foot is a box: box–box contacts are MuJoCo's cheapest
+/// stable ones, and only the foot touches what the bowl stands on.
+fn bowl(out: &mut String, p: &str) {
+    let mut g = geoms(out, p, [0.06, 0.06, 0.065, 1.0]);
+    g.bx([0.0, 0.0, 0.005], [0.027, 0.027, 0.003], 0.0016);
+    g.ring(12, 0.036, 0.0535, 0.006, 0.052, 0.005, 0.004);
+}
+
+/// Plate: Ø 0.138 m, 0.019 m tall (z −0.0025…0.0164): a flat square centre and a low rim that does
+/// not reach the table.
 fn plate(out: &mut String, p: &str) {
     let mut g = geoms(out, p, [0.92, 0.92, 0.88, 1.0]);
-    g.cyl([0.0, 0.0, 0.0015], 0.052, 0.004, 0.007);
-    g.ring(16, 0.052, 0.069, 0.0, 0.0164, 0.004, 0.0045);
+    g.bx([0.0, 0.0, 0.0005], [0.05, 0.05, 0.003], 0.007);
+    g.ring(12, 0.056, 0.069, 0.001, 0.0164, 0.004, 0.0045);
 }
 
 /// Basket: 0.17 × 0.157 × 0.141 m, open top, thin walls whose upper edge is a graspable rim.
@@ -480,6 +506,7 @@ fn wine_rack(out: &mut String, p: &str) {
     let site_pos = [0.0, -0.08003, 0.21745];
     {
         let mut g = geoms(out, p, [0.45, 0.30, 0.18, 1.0]);
+        frame_bits(&mut g);
         // Base and two side frames.
         g.bx([0.0, 0.0, 0.004], [0.1345, 0.127, 0.006], 0.05);
         g.bx([0.128, 0.0, 0.165], [0.0065, 0.127, 0.004], 0.02);
@@ -537,6 +564,7 @@ fn qrot(q: [f64; 4], v: [f64; 3]) -> [f64; 3] {
 fn flat_stove(out: &mut String, p: &str) {
     {
         let mut g = geoms(out, p, [0.2, 0.2, 0.22, 1.0]);
+        frame_bits(&mut g);
         g.friction = "1 0.005 0.0001";
         g.contact = r#"solref="0.02 1""#;
         // Cook top slab and burner plate (the cook region sits on its surface).
@@ -567,6 +595,7 @@ fn flat_stove(out: &mut String, p: &str) {
     );
     {
         let mut g = geoms(out, p, [0.85, 0.85, 0.87, 1.0]);
+        part_bits(&mut g);
         g.n = 10;
         g.friction = "1 0.005 0.0001";
         g.contact = r#"solref="0.02 1""#;
@@ -586,6 +615,7 @@ fn wooden_cabinet(out: &mut String, p: &str) {
     let hy = 0.5 * (y_back - y_front);
     {
         let mut g = geoms(out, p, wood);
+        frame_bits(&mut g);
         g.bx(
             [hx - t / 2.0, yc, (z0 + z1) / 2.0],
             [t / 2.0, hy, (z1 - z0) / 2.0],
@@ -636,6 +666,7 @@ fn wooden_cabinet(out: &mut String, p: &str) {
         );
         {
             let mut g = geoms(out, p, [0.6, 0.4, 0.22, 1.0]);
+            part_bits(&mut g);
             g.n = n0;
             let (dx, dy0, dy1) = (0.106, -0.086, 0.112);
             let (bot, top) = (zc - 0.031, zc + 0.027);
@@ -649,6 +680,7 @@ fn wooden_cabinet(out: &mut String, p: &str) {
             // Front panel (closes the carcass) and the handle.
             g.bx([0.0, dy0 - 0.006, zc - 0.002], [0.118, 0.006, 0.032], 0.0);
             let mut h = geoms(g.out, p, [0.75, 0.72, 0.65, 1.0]);
+            part_bits(&mut h);
             h.n = n0 + 5;
             h.bx([0.0, dy0 - 0.026, zc], [0.035, 0.005, 0.006], 0.0);
             h.bx([0.03, dy0 - 0.018, zc], [0.004, 0.007, 0.005], 0.0);

@@ -19,7 +19,8 @@ use crate::render::{Channels, RenderError, RenderQuality, Renderer};
 use crate::robot::{
     BASE_POS, ENV_CONAFFINITY, ENV_CONTYPE, INIT_FINGERS, INIT_QPOS, PandaIds, panda_xml,
 };
-use crate::scene::{Scene, SceneError};
+use crate::scene::{Scene, SceneError, SceneSpec};
+use crate::task::{Atom, GoalTracker, TaskSpec};
 
 /// Physics substeps per control step (0.05 s / 0.002 s).
 pub const SUBSTEPS: usize = 25;
@@ -48,6 +49,9 @@ pub enum EnvError {
     /// The task scene could not be composed or placed.
     #[error(transparent)]
     Scene(#[from] SceneError),
+    /// The task could not be resolved or parsed.
+    #[error(transparent)]
+    Task(#[from] crate::task::TaskError),
 }
 
 /// Environment settings.
@@ -117,6 +121,8 @@ pub struct Observation {
     pub eef_pos: [f64; 3],
     /// End-effector orientation (`robot0_right_hand` body), quaternion wxyz.
     pub eef_quat: [f64; 4],
+    /// Goal progress (task environments).
+    pub goal: Option<GoalStatus>,
 }
 
 /// Builds the MJCF of the minimal scene: floor, LIBERO's tabletop table, cameras, the Panda, one box.
@@ -128,6 +134,7 @@ pub fn minimal_scene_xml() -> String {
         r#"<mujoco model="libero_tabletop_box">
 <compiler angle="radian" autolimits="true"/>
 <option timestep="0.002" impratio="20" cone="elliptic" density="1.2" viscosity="2e-5"/>
+<size njmax="5000" nconmax="5000"/>
 <visual><global offwidth="256" offheight="256"/><quality offsamples="0" numslices="16" numstacks="8" numquads="1"/><headlight ambient="0.25 0.25 0.25" diffuse="0.3 0.3 0.3" specular="0.1 0.1 0.1"/></visual>
 <asset>
 <texture name="floor_tex" type="2d" builtin="checker" rgb1="0.62 0.62 0.62" rgb2="0.56 0.56 0.56" width="64" height="64"/>
@@ -177,8 +184,32 @@ pub fn minimal_scene_xml() -> String {
 enum World {
     /// The minimal scene: one free box (qpos address of its free joint).
     Minimal { cube_qpos: usize },
-    /// A task scene composed from BDDL.
-    Task(Box<Scene>),
+    /// A task scene composed from BDDL, with its goal tracker when it comes from a task.
+    Task(Box<Scene>, Option<Box<GoalTracker>>),
+}
+
+/// Goal progress reported with each observation of a task environment.
+#[derive(Debug, Clone, PartialEq)]
+pub struct GoalStatus {
+    /// Satisfied subgoals.
+    pub satisfied: usize,
+    /// Goal length.
+    pub goal_len: usize,
+    /// Every subgoal satisfied and the final one holds now, with no over-repetition.
+    pub done: bool,
+    /// Over-repetition after completion.
+    pub failed: bool,
+    /// Text of the pending subgoal ("bowl 1 on plate 3"), `None` once complete.
+    pub pending: Option<String>,
+    /// Texts of the satisfied subgoals ("one: bowl 1 on plate 1", …).
+    pub satisfied_texts: Vec<String>,
+}
+
+impl GoalStatus {
+    /// Tiered credit, satisfied / goal length.
+    pub fn tiered(&self) -> f64 {
+        self.satisfied as f64 / self.goal_len.max(1) as f64
+    }
 }
 
 /// The environment: LIBERO's control loop over the minimal scene or a task scene.
@@ -205,10 +236,27 @@ impl Env {
         Self::build(model, World::Minimal { cube_qpos }, cfg)
     }
 
-    /// A task scene (see [`Scene::build`]). `reset` samples a valid initial state and settles it.
+    /// A task scene (see [`Scene::build`]) without goal tracking. `reset` samples a valid initial state
+    /// and settles it.
     pub fn with_scene(scene: Scene, cfg: EnvConfig) -> Result<Env, EnvError> {
         let model = scene.model.clone();
-        Self::build(model, World::Task(Box::new(scene)), cfg)
+        Self::build(model, World::Task(Box::new(scene), None), cfg)
+    }
+
+    /// A shipped or user task: its scene, and its goal tracked at every step (reported in
+    /// [`Observation::goal`]). Every `:init` and `:goal` atom is checked against the scene here.
+    pub fn from_task(task: &TaskSpec, cfg: EnvConfig) -> Result<Env, EnvError> {
+        let scene = Scene::build(SceneSpec::from_problem(&task.problem))?;
+        for a in task.problem.init.iter().chain(task.problem.goal.atoms()) {
+            scene.check_atom(&a.predicate, &a.args)?;
+        }
+        let tracker = task.tracker();
+        let model = scene.model.clone();
+        Self::build(
+            model,
+            World::Task(Box::new(scene), Some(Box::new(tracker))),
+            cfg,
+        )
     }
 
     fn build(model: Arc<Model>, world: World, cfg: EnvConfig) -> Result<Env, EnvError> {
@@ -243,7 +291,7 @@ impl Env {
         ];
         // Stoves glow when on (LIBERO's `_post_process`): (burner site, instance index).
         let burners = match &world {
-            World::Task(scene) => scene
+            World::Task(scene, _) => scene
                 .instances
                 .iter()
                 .enumerate()
@@ -275,7 +323,7 @@ impl Env {
     /// The task scene, if this is a task environment.
     pub fn scene(&self) -> Option<&Scene> {
         match &self.world {
-            World::Task(s) => Some(s),
+            World::Task(s, _) => Some(s),
             World::Minimal { .. } => None,
         }
     }
@@ -336,7 +384,7 @@ impl Env {
                         (yaw / 2.0).sin(),
                     ]);
                 }
-                World::Task(scene) => scene.sample_init(&mut self.data, &mut rng)?,
+                World::Task(scene, _) => scene.sample_init(&mut self.data, &mut rng)?,
             }
             self.data.qvel_mut().fill(0.0);
             self.data.ctrl_mut().fill(0.0);
@@ -344,7 +392,7 @@ impl Env {
             // robosuite re-creates the controller at reset: goal = current pose, posture = current arm qpos.
             self.osc = OscPose::new(self.ids.clone(), &self.data);
             self.gripper = GripperRamp::default();
-            if let World::Task(_) = self.world {
+            if let World::Task(..) = self.world {
                 for _ in 0..self.cfg.settle_steps {
                     self.step_physics(&self.cfg.settle_action.clone())?;
                 }
@@ -354,6 +402,11 @@ impl Env {
                 }
             }
             self.steps = 0;
+            // The tracker starts on the settled state (LIBERO-Mem counts from there).
+            if let World::Task(_, Some(t)) = &mut self.world {
+                t.reset();
+            }
+            self.track_goal();
             return self.observe();
         }
         Err(EnvError::Config(format!(
@@ -404,7 +457,33 @@ impl Env {
     /// Applies one 7-D action `[dx, dy, dz, dax, day, daz, gripper]` in [−1, 1] for one control step.
     pub fn step(&mut self, action: &[f32]) -> Result<Observation, EnvError> {
         self.step_physics(action)?;
+        self.track_goal();
         self.observe()
+    }
+
+    /// One goal-tracker step on the current state (LIBERO-Mem's once-per-control-step check).
+    fn track_goal(&mut self) {
+        if let World::Task(scene, Some(tracker)) = &mut self.world {
+            let p = Predicates::new(scene, &self.data);
+            // Atoms were checked against the scene at construction; LIBERO's own evaluation errors
+            // (In with an object container while touching) count as false.
+            tracker.step(&mut |a: &Atom| p.eval(&a.predicate, &a.args).unwrap_or(false));
+        }
+    }
+
+    /// Goal progress now (task environments built from a task).
+    pub fn goal(&self) -> Option<GoalStatus> {
+        match &self.world {
+            World::Task(_, Some(t)) => Some(GoalStatus {
+                satisfied: t.satisfied_len(),
+                goal_len: t.goal_len(),
+                done: t.done(),
+                failed: t.failed(),
+                pending: t.pending_text(),
+                satisfied_texts: t.satisfied_texts(),
+            }),
+            _ => None,
+        }
     }
 
     /// Runs the control loop for one action without rendering or observing.
@@ -475,9 +554,10 @@ impl Env {
             joint_state,
             eef_pos,
             eef_quat,
+            goal: self.goal(),
         };
         if let Some(r) = self.renderer.as_mut() {
-            if let World::Task(scene) = &self.world {
+            if let World::Task(scene, _) = &self.world {
                 let q = self.data.qpos();
                 let decor = self
                     .burners
@@ -539,7 +619,7 @@ impl Env {
                 let q = &self.data.qpos()[c..c + 3];
                 Some([q[0], q[1], q[2]])
             }
-            World::Task(_) => None,
+            World::Task(..) => None,
         }
     }
 }

@@ -12,7 +12,7 @@ pub mod render;
 pub mod robot;
 pub mod task;
 
-pub use env::{Env, EnvConfig, EnvError, Observation};
+pub use env::{Env, EnvConfig, EnvError, GoalStatus, Observation};
 pub mod assets;
 pub mod bench;
 pub mod predicates;

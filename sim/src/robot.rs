@@ -190,7 +190,7 @@ pub fn panda_xml(base_pos: [f64; 3]) -> PandaXml {
 <body name="gripper0_leftfinger" pos="0 0 0.0524" quat="0.707107 0 0 0.707107">
 <inertial pos="0 0 0.05" mass="0.1" diaginertia="0.01 0.01 0.005"/>
 <joint name="gripper0_finger_joint1" type="slide" axis="0 1 0" range="0 0.04" limited="true" damping="100" armature="1" frictionloss="1"/>
-<geom name="gripper0_finger1_g" type="box" pos="0 0.014 0.025" size="0.01 0.006 0.025" contype="0" conaffinity="1" condim="4" friction="1 0.005 0.0001" solref="0.02 1" group="1" rgba="0.25 0.25 0.27 1"/>
+<geom name="gripper0_finger1_g" type="box" pos="0 0.014 0.025" size="0.01 0.006 0.025" contype="0" conaffinity="13" condim="4" friction="1 0.005 0.0001" solref="0.02 1" group="1" rgba="0.25 0.25 0.27 1"/>
 <body name="gripper0_finger_joint1_tip" pos="0 0.0085 0.056">
 <inertial pos="0 0 0" mass="0.01" diaginertia="0.01 0.01 0.01"/>
 <geom name="gripper0_finger1_pad_g" type="box" pos="0 -0.005 -0.015" size="0.008 0.004 0.008" contype="1" conaffinity="1" friction="2 0.05 0.0001" solref="0.01 0.5" group="1" rgba="0.4 0.4 0.42 1"/>
@@ -199,7 +199,7 @@ pub fn panda_xml(base_pos: [f64; 3]) -> PandaXml {
 <body name="gripper0_rightfinger" pos="0 0 0.0524" quat="0.707107 0 0 0.707107">
 <inertial pos="0 0 0.05" mass="0.1" diaginertia="0.01 0.01 0.005"/>
 <joint name="gripper0_finger_joint2" type="slide" axis="0 1 0" range="-0.04 0" limited="true" damping="100" armature="1" frictionloss="1"/>
-<geom name="gripper0_finger2_g" type="box" pos="0 -0.014 0.025" size="0.01 0.006 0.025" contype="0" conaffinity="1" condim="4" friction="1 0.005 0.0001" solref="0.02 1" group="1" rgba="0.25 0.25 0.27 1"/>
+<geom name="gripper0_finger2_g" type="box" pos="0 -0.014 0.025" size="0.01 0.006 0.025" contype="0" conaffinity="13" condim="4" friction="1 0.005 0.0001" solref="0.02 1" group="1" rgba="0.25 0.25 0.27 1"/>
 <body name="gripper0_finger_joint2_tip" pos="0 -0.0085 0.056">
 <inertial pos="0 0 0" mass="0.01" diaginertia="0.01 0.01 0.01"/>
 <geom name="gripper0_finger2_pad_g" type="box" pos="0 0.005 -0.015" size="0.008 0.004 0.008" contype="1" conaffinity="1" friction="2 0.05 0.0001" solref="0.01 0.5" group="1" rgba="0.4 0.4 0.42 1"/>

@@ -116,6 +116,40 @@ pub struct SceneSpec {
     pub init: Vec<AtomSpec>,
 }
 
+impl SceneSpec {
+    /// The scene part of a parsed BDDL problem.
+    pub fn from_problem(p: &crate::task::Problem) -> SceneSpec {
+        let inst = |i: &crate::task::Instance| InstanceSpec {
+            name: i.name.clone(),
+            category: i.category.clone(),
+        };
+        SceneSpec {
+            problem_class: p.problem_class.lowercase_name(),
+            regions: p
+                .regions
+                .iter()
+                .map(|r| RegionSpec {
+                    name: r.name.clone(),
+                    target: r.target.clone(),
+                    ranges: r.ranges.clone(),
+                    yaw: r.yaw_or_default(),
+                    rgba: r.rgba_or_default(),
+                })
+                .collect(),
+            fixtures: p.fixtures.iter().map(inst).collect(),
+            objects: p.objects.iter().map(inst).collect(),
+            init: p
+                .init
+                .iter()
+                .map(|a| AtomSpec {
+                    predicate: a.predicate.clone(),
+                    args: a.args.clone(),
+                })
+                .collect(),
+        }
+    }
+}
+
 /// Arena (LIBERO problem class).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Arena {
@@ -330,6 +364,7 @@ pub fn compose_xml(spec: &SceneSpec) -> Result<String, SceneError> {
         r#"<mujoco model="{class}">
 <compiler angle="radian" autolimits="true"/>
 <option timestep="0.002" impratio="20" cone="elliptic" density="1.2" viscosity="2e-5"/>
+<size njmax="5000" nconmax="5000"/>
 <visual><global offwidth="256" offheight="256"/><quality offsamples="0" numslices="16" numstacks="8" numquads="1"/><headlight ambient="0.25 0.25 0.25" diffuse="0.3 0.3 0.3" specular="0.1 0.1 0.1"/></visual>
 <asset>
 <texture name="floor_tex" type="2d" builtin="checker" rgb1="{floor1}" rgb2="{floor2}" width="64" height="64"/>
@@ -453,6 +488,21 @@ impl Scene {
             spec,
             xml,
         })
+    }
+
+    /// Checks that every argument of `(predicate args…)` names an instance or a region with a site here.
+    pub fn check_atom(&self, predicate: &str, args: &[String]) -> Result<(), SceneError> {
+        for a in args {
+            let known =
+                self.instance(a).is_some() || self.regions.get(a).is_some_and(|r| r.site.is_some());
+            if !known {
+                return Err(SceneError::Init(format!(
+                    "({predicate} {}): '{a}' is neither an object nor a fixture nor a region with a site in this scene",
+                    args.join(" ")
+                )));
+            }
+        }
+        Ok(())
     }
 
     /// Index of the named instance.

@@ -25,7 +25,10 @@ pub fn contact_sheet(tiles: &[(String, Frame)], cols: usize) -> Option<RgbImage>
         if frame.width as u32 != tw || frame.height as u32 != th {
             return None;
         }
-        let (cx, cy) = ((k as u32 % cols) * (tw + pad) + pad, (k as u32 / cols) * (th + LABEL_H + pad) + pad);
+        let (cx, cy) = (
+            (k as u32 % cols) * (tw + pad) + pad,
+            (k as u32 / cols) * (th + LABEL_H + pad) + pad,
+        );
         for y in 0..th {
             for x in 0..tw {
                 let i = 3 * (y * tw + x) as usize;
@@ -44,7 +47,9 @@ fn draw_text(img: &mut RgbImage, x: u32, y: u32, text: &str, max_w: u32) {
         if ox + 8 > x + max_w {
             break;
         }
-        let Some(glyph) = font8x8::BASIC_FONTS.get(ch) else { continue };
+        let Some(glyph) = font8x8::BASIC_FONTS.get(ch) else {
+            continue;
+        };
         for (row, bits) in glyph.iter().enumerate() {
             for col in 0..8u32 {
                 if bits & (1 << col) != 0 {
@@ -70,7 +75,15 @@ mod tests {
             rgb: Some(vec![v; 48]),
             ..Frame::default()
         };
-        let img = contact_sheet(&[("a".into(), frame(10)), ("b".into(), frame(200)), ("c".into(), frame(90))], 2).unwrap();
+        let img = contact_sheet(
+            &[
+                ("a".into(), frame(10)),
+                ("b".into(), frame(200)),
+                ("c".into(), frame(90)),
+            ],
+            2,
+        )
+        .unwrap();
         assert_eq!(img.dimensions(), (2 * 8 + 4, 2 * (4 + 12 + 4) + 4));
         assert_eq!(img.get_pixel(4, 4).0, [10, 10, 10]);
         assert_eq!(img.get_pixel(12, 4).0, [200, 200, 200]);
