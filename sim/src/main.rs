@@ -32,8 +32,28 @@ enum Quality {
 enum Command {
     /// Print the MuJoCo version and the OpenGL renderer in use.
     Info,
-    /// Render one camera of the built-in scene (or of an MJCF file) to a PNG.
+    /// List the shipped tasks (id, goal length, step budget, instruction).
+    Tasks,
+    /// Render the agentview of every shipped task at one seed into a labelled contact sheet.
+    Sheet {
+        /// Output PNG path.
+        #[arg(long, default_value = "docs/tasks.png")]
+        out: PathBuf,
+        /// Reset seed.
+        #[arg(long, default_value_t = 0)]
+        seed: u64,
+        /// Tile size in pixels.
+        #[arg(long, default_value_t = 160)]
+        size: usize,
+        /// Camera name.
+        #[arg(long, default_value = "agentview")]
+        camera: String,
+    },
+    /// Render one camera of a task, the built-in scene, or an MJCF file to a PNG.
     Render {
+        /// Task id (`t7`, `libero_mem/t3@12`, `libero_goal/<name>`) or a `.bddl` path.
+        #[arg(long, conflicts_with = "mjcf")]
+        task: Option<String>,
         /// Output PNG path.
         #[arg(long)]
         out: PathBuf,
@@ -89,8 +109,22 @@ fn classify(e: EnvError) -> anyhow::Error {
         }
         EnvError::Config(_) | EnvError::Action(_) => BadInput(e.to_string()).into(),
         EnvError::Mujoco(m @ MjError::Load { .. }) => BadInput(m.to_string()).into(),
+        EnvError::Task(t) => BadInput(t.to_string()).into(),
+        EnvError::Scene(s @ sim::scene::SceneError::UnknownCategory { .. }) => {
+            BadInput(s.to_string()).into()
+        }
         other => other.into(),
     }
+}
+
+fn check_out_dir(out: &std::path::Path) -> anyhow::Result<()> {
+    if let Some(dir) = out.parent().filter(|d| !d.as_os_str().is_empty())
+        && !dir.is_dir()
+    {
+        let msg = format!("output folder {} does not exist", dir.display());
+        return Err(BadInput(msg).into());
+    }
+    Ok(())
 }
 
 fn main() -> ExitCode {
@@ -129,7 +163,63 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             );
             Ok(())
         }
+        Command::Tasks => {
+            println!("{:<58} {:>4} {:>6}  instruction", "id", "goal", "steps");
+            for t in sim::task::list() {
+                println!(
+                    "{:<58} {:>4} {:>6}  {}",
+                    t.id, t.goal_len, t.max_steps, t.instruction
+                );
+            }
+            Ok(())
+        }
+        Command::Sheet {
+            out,
+            seed,
+            size,
+            camera,
+        } => {
+            if size == 0 || size > 1024 {
+                return Err(
+                    BadInput(format!("--size must be between 1 and 1024, got {size}")).into(),
+                );
+            }
+            check_out_dir(&out)?;
+            let mut tiles = Vec::new();
+            for t in sim::task::list() {
+                let mut env = Env::from_task(
+                    &t,
+                    EnvConfig {
+                        image_size: size,
+                        ..EnvConfig::default()
+                    },
+                )
+                .map_err(classify)?;
+                env.reset(seed)
+                    .with_context(|| format!("resetting {}", t.id))?;
+                let (r, data) = env.renderer_mut().context("rendering is off")?;
+                let frame = r
+                    .render_named(data, &camera, size, Channels::RGB)
+                    .map_err(|e| classify(e.into()))?;
+                tiles.push((
+                    t.id.replace("libero_goal/", "goal/")
+                        .replace("libero_mem/", "mem/"),
+                    frame,
+                ));
+            }
+            let img = sim::sheet::contact_sheet(&tiles, 5).context("no tiles")?;
+            let tmp = out.with_extension("png.tmp");
+            img.save_with_format(&tmp, image::ImageFormat::Png)?;
+            std::fs::rename(&tmp, &out)?;
+            println!(
+                "wrote {} ({} tasks, seed {seed}, camera {camera})",
+                out.display(),
+                tiles.len()
+            );
+            Ok(())
+        }
         Command::Render {
+            task,
             out,
             camera,
             size,
@@ -146,14 +236,25 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                 Quality::Fast => RenderQuality::default(),
                 Quality::High => RenderQuality::high(),
             };
-            if let Some(dir) = out.parent().filter(|d| !d.as_os_str().is_empty())
-                && !dir.is_dir()
-            {
-                let msg = format!("output folder {} does not exist", dir.display());
-                return Err(BadInput(msg).into());
-            }
-            let frame = match mjcf {
-                Some(path) => {
+            check_out_dir(&out)?;
+            let frame = match (task, mjcf) {
+                (Some(id), _) => {
+                    let spec = sim::task::resolve(&id).map_err(|e| BadInput(e.to_string()))?;
+                    let mut env = Env::from_task(
+                        &spec,
+                        EnvConfig {
+                            image_size: size,
+                            quality,
+                            ..EnvConfig::default()
+                        },
+                    )
+                    .map_err(classify)?;
+                    env.reset(seed).map_err(classify)?;
+                    let (r, data) = env.renderer_mut().context("rendering is off")?;
+                    r.render_named(data, &camera, size, Channels::RGB)
+                        .map_err(|e| classify(e.into()))?
+                }
+                (None, Some(path)) => {
                     let model = std::sync::Arc::new(
                         Model::from_xml_file(&path).map_err(|e| BadInput(e.to_string()))?,
                     );
@@ -165,7 +266,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                     r.render_named(&mut data, &camera, size, Channels::RGB)
                         .map_err(|e| classify(e.into()))?
                 }
-                None => {
+                (None, None) => {
                     let mut env = Env::new(EnvConfig {
                         image_size: size,
                         quality,

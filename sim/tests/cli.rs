@@ -162,3 +162,68 @@ fn bench_json_has_every_figure() {
         assert!(x > 0.0 && x.is_finite(), "{key} = {x}");
     }
 }
+
+#[test]
+fn tasks_lists_twenty() {
+    let (code, out, err) = sim(&["tasks"]);
+    assert_eq!(code, 0, "{err}");
+    let rows: Vec<&str> = out.lines().skip(1).collect();
+    assert_eq!(rows.len(), 20, "{out}");
+    assert!(
+        rows[6].starts_with("libero_mem/t7") && rows[6].contains("swap the 2 bowls"),
+        "{}",
+        rows[6]
+    );
+}
+
+#[test]
+fn render_a_task() {
+    let path = tmp("t7.png");
+    let (code, _, err) = sim(&[
+        "render",
+        "--task",
+        "t7",
+        "--seed",
+        "3",
+        "--out",
+        path.to_str().unwrap(),
+        "--size",
+        "64",
+    ]);
+    assert_eq!(code, 0, "{err}");
+    assert_eq!(image::open(&path).unwrap().to_rgb8().dimensions(), (64, 64));
+}
+
+#[test]
+fn unknown_task_lists_the_known_ids() {
+    let (code, _, err) = sim(&[
+        "render",
+        "--task",
+        "t42",
+        "--out",
+        tmp("x.png").to_str().unwrap(),
+    ]);
+    assert_eq!(code, 2, "{err}");
+    assert!(
+        err.contains("t42")
+            && err.contains("libero_mem/t10")
+            && err.contains("libero_goal/put_the_bowl_on_the_plate"),
+        "{err}"
+    );
+}
+
+#[test]
+fn bddl_syntax_error_names_file_line_and_column() {
+    let bad = tmp("broken.bddl");
+    std::fs::write(&bad, "(define (problem LIBERO_Tabletop_Manipulation)\n  (:domain robosuite)\n  (:objects plate_1 - plate\n").unwrap();
+    let (code, _, err) = sim(&[
+        "render",
+        "--task",
+        bad.to_str().unwrap(),
+        "--out",
+        tmp("y.png").to_str().unwrap(),
+    ]);
+    assert_eq!(code, 2, "{err}");
+    assert!(err.contains("broken.bddl:"), "{err}");
+    assert!(err.contains(":1:1") || err.contains(":3:"), "{err}");
+}

@@ -2,7 +2,7 @@
 
 use sim::mujoco::Data;
 use sim::predicates::Predicates;
-use sim::scene::{AtomSpec, InstanceSpec, RegionSpec, Scene, SceneSpec};
+use sim::scene::{InstanceSpec, RegionSpec, Scene, SceneSpec};
 
 fn spec() -> SceneSpec {
     let region = |name: &str, target: &str, r: Option<[f64; 4]>| RegionSpec {
