@@ -5,7 +5,6 @@
 //! goal on the first substep, gripper ramp on every substep) and returns an [`Observation`]. Same seed and
 //! same actions give bit-identical observations, images included.
 
-use std::fmt::Write;
 use std::sync::Arc;
 
 use rand::{Rng, SeedableRng};
@@ -16,10 +15,8 @@ use crate::mujoco::{Data, MjError, Model, ObjType};
 use crate::predicates::Predicates;
 use crate::render::Decor;
 use crate::render::{Channels, RenderError, RenderQuality, Renderer};
-use crate::robot::{
-    BASE_POS, ENV_CONAFFINITY, ENV_CONTYPE, INIT_FINGERS, INIT_QPOS, PandaIds, panda_xml,
-};
-use crate::scene::{Scene, SceneError, SceneSpec};
+use crate::robot::{INIT_FINGERS, INIT_QPOS, PandaIds};
+use crate::scene::{Arena, Scene, SceneError, SceneSpec};
 use crate::task::{Atom, GoalTracker, TaskSpec};
 
 /// Physics substeps per control step (0.05 s / 0.002 s).
@@ -125,59 +122,18 @@ pub struct Observation {
     pub goal: Option<GoalStatus>,
 }
 
-/// Builds the MJCF of the minimal scene: floor, LIBERO's tabletop table, cameras, the Panda, one box.
+/// Builds the MJCF of the minimal scene: LIBERO's tabletop arena, cameras, the Panda, one box.
 pub fn minimal_scene_xml() -> String {
-    let panda = panda_xml(BASE_POS);
-    let mut x = String::new();
-    let _ = write!(
-        x,
-        r#"<mujoco model="libero_tabletop_box">
-<compiler angle="radian" autolimits="true"/>
-<option timestep="0.002" impratio="20" cone="elliptic" density="1.2" viscosity="2e-5"/>
-<size njmax="5000" nconmax="5000"/>
-<visual><global offwidth="256" offheight="256"/><quality offsamples="0" numslices="16" numstacks="8" numquads="1"/><headlight ambient="0.25 0.25 0.25" diffuse="0.3 0.3 0.3" specular="0.1 0.1 0.1"/></visual>
-<asset>
-<texture name="floor_tex" type="2d" builtin="checker" rgb1="0.62 0.62 0.62" rgb2="0.56 0.56 0.56" width="64" height="64"/>
-<material name="floor_mat" texture="floor_tex" texrepeat="12 12" reflectance="0"/>
-<material name="table_mat" rgba="0.62 0.45 0.30 1" reflectance="0"/>
-<material name="wall_mat" rgba="0.82 0.82 0.80 1" reflectance="0"/>
-</asset>
-<default>
-{defaults}<default class="env"><geom contype="{ct}" conaffinity="{ca}" group="1"/></default>
-</default>
-<worldbody>
-<light name="light0" pos="1 1 4" dir="-0.24 -0.24 -0.94" diffuse="0.55 0.55 0.55" specular="0.2 0.2 0.2" castshadow="false"/>
-<light name="light1" pos="-3 -3 4" dir="0.51 0.51 -0.69" diffuse="0.55 0.55 0.55" specular="0.2 0.2 0.2" castshadow="false"/>
-<geom name="floor" class="env" type="plane" size="3 3 0.125" material="floor_mat"/>
-<geom name="wall_back" type="box" pos="-1.6 0 1.5" size="0.01 3 1.5" material="wall_mat" contype="0" conaffinity="0" group="1"/>
-<geom name="wall_left" type="box" pos="0 3 1.5" size="3 0.01 1.5" material="wall_mat" contype="0" conaffinity="0" group="1"/>
-<geom name="wall_right" type="box" pos="0 -3 1.5" size="3 0.01 1.5" material="wall_mat" contype="0" conaffinity="0" group="1"/>
-<body name="table" pos="0 0 0.875">
-<geom name="table_collision" class="env" type="box" size="0.5 0.6 0.025" friction="0.6 0.005 0.0001" material="table_mat"/>
-<geom name="table_leg1" type="cylinder" fromto="0.4 0.5 -0.025 0.4 0.5 -0.875" size="0.025" contype="0" conaffinity="0" group="1" rgba="0.3 0.3 0.3 1"/>
-<geom name="table_leg2" type="cylinder" fromto="-0.4 0.5 -0.025 -0.4 0.5 -0.875" size="0.025" contype="0" conaffinity="0" group="1" rgba="0.3 0.3 0.3 1"/>
-<geom name="table_leg3" type="cylinder" fromto="0.4 -0.5 -0.025 0.4 -0.5 -0.875" size="0.025" contype="0" conaffinity="0" group="1" rgba="0.3 0.3 0.3 1"/>
-<geom name="table_leg4" type="cylinder" fromto="-0.4 -0.5 -0.025 -0.4 -0.5 -0.875" size="0.025" contype="0" conaffinity="0" group="1" rgba="0.3 0.3 0.3 1"/>
-<site name="table_top" pos="0 0 0.025" size="0.001" rgba="0 0 0 0"/>
-</body>
-<camera name="agentview" pos="0.6586131746834771 0 1.6103500240372423" quat="0.6380177736282349 0.3048497438430786 0.30484986305236816 0.6380177736282349" fovy="45"/>
-<camera name="frontview" pos="1.0 0 1.48" quat="0.56 0.43 0.43 0.56" fovy="45"/>
-{body}<body name="cube" pos="0 0 0.92">
+    let cube = format!(
+        r#"<body name="cube" pos="0 0 0.92">
 <freejoint name="cube_joint"/>
-<geom name="cube_g" class="env" type="box" size="0.02 0.02 0.02" mass="0.1" friction="1 0.005 0.0001" rgba="0.85 0.15 0.12 1"/>
+<geom name="cube_g" type="box" size="0.02 0.02 0.02" mass="0.1" friction="1 0.005 0.0001" rgba="0.85 0.15 0.12 1" contype="{}" conaffinity="{}" group="1"/>
 </body>
-</worldbody>
-<actuator>
-{actuators}</actuator>
-</mujoco>
 "#,
-        defaults = panda.defaults,
-        body = panda.body,
-        actuators = panda.actuators,
-        ct = ENV_CONTYPE,
-        ca = ENV_CONAFFINITY,
+        crate::assets::bits::OBJECT_TYPE,
+        crate::assets::bits::OBJECT_AFFINITY
     );
-    x
+    crate::scene::world_xml(Arena::Tabletop, "libero_tabletop_box", "", &cube)
 }
 
 /// What the environment simulates besides the robot.

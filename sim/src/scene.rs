@@ -284,7 +284,6 @@ impl std::fmt::Debug for Scene {
 pub fn compose_xml(spec: &SceneSpec) -> Result<String, SceneError> {
     let arena = Arena::from_class(&spec.problem_class)?;
     let ws = arena.workspace();
-    let panda = panda_xml(BASE_POS);
     let mut zones = String::new();
     for r in &spec.regions {
         if r.target != ws {
@@ -346,6 +345,14 @@ pub fn compose_xml(spec: &SceneSpec) -> Result<String, SceneError> {
             [1.0, 0.0, 0.0, 0.0],
         ));
     }
+    Ok(world_xml(arena, &spec.problem_class, &zones, &bodies))
+}
+
+/// The MJCF of an arena (floor, walls, lights, table with its TargetZone sites `zones`, cameras) with the
+/// Panda and the given extra `<body>` elements, in LIBERO's assembly order.
+pub fn world_xml(arena: Arena, model_name: &str, zones: &str, bodies: &str) -> String {
+    let ws = arena.workspace();
+    let panda = panda_xml(BASE_POS);
     let (wall, floor1, floor2, table) = match arena {
         Arena::Tabletop => (
             "0.82 0.82 0.80 1",
@@ -360,9 +367,8 @@ pub fn compose_xml(spec: &SceneSpec) -> Result<String, SceneError> {
             "0.70 0.55 0.38 1",
         ),
     };
-    Ok(format!(
-        r#"<mujoco model="{class}">
-<compiler angle="radian" autolimits="true"/>
+    format!(
+        r#"<mujoco model="{model_name}"><compiler angle="radian" autolimits="true"/>
 <option timestep="0.002" impratio="20" cone="elliptic" density="1.2" viscosity="2e-5"/>
 <size njmax="5000" nconmax="5000"/>
 <visual><global offwidth="256" offheight="256"/><quality offsamples="0" numslices="16" numstacks="8" numquads="1"/><headlight ambient="0.25 0.25 0.25" diffuse="0.3 0.3 0.3" specular="0.1 0.1 0.1"/></visual>
@@ -396,14 +402,13 @@ pub fn compose_xml(spec: &SceneSpec) -> Result<String, SceneError> {
 {actuators}</actuator>
 </mujoco>
 "#,
-        class = spec.problem_class,
         defaults = panda.defaults,
         robot = panda.body,
         actuators = panda.actuators,
         friction = arena.friction(),
         ct = ENV_CONTYPE,
         ca = ENV_CONAFFINITY,
-    ))
+    )
 }
 
 fn lookup(inst: &InstanceSpec) -> Result<&'static AssetDef, SceneError> {

@@ -193,7 +193,7 @@ fn segmentation_sees_the_table_robot_and_box() {
     let seg = obs.agentview_segmentation.unwrap();
     let model = env.model().clone();
     let id = |n: &str| model.id(sim::mujoco::ObjType::Body, n).unwrap() as i32;
-    for name in ["table", "robot0_base", "cube"] {
+    for name in ["main_table", "robot0_base", "cube"] {
         let n = seg.iter().filter(|&&s| s == id(name)).count();
         assert!(n > 10, "{name}: {n} pixels");
     }
@@ -209,7 +209,7 @@ fn the_box_rests_on_the_table_with_contacts() {
     let model = env.model().clone();
     let cube = model.id(sim::mujoco::ObjType::Geom, "cube_g").unwrap();
     let table = model
-        .id(sim::mujoco::ObjType::Geom, "table_collision")
+        .id(sim::mujoco::ObjType::Geom, "main_table_collision")
         .unwrap();
     let contacts = env.data().contacts();
     let touching: Vec<_> = contacts
