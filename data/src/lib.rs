@@ -1,1 +1,14 @@
-//! Episodes on disk: schema, mcap I/O, RLDS import, windows. (Not built yet: see the data issue.)
+//! Episodes on disk for LIBERO-Mem research: the episode schema and its mcap I/O, the dataset
+//! index with action/state statistics, RLDS (TFRecord) import, and windowed training samples
+//! (with Burn `Dataset`/`Batcher` adapters behind the `burn` feature).
+
+pub mod episode;
+pub mod error;
+pub mod imageio;
+pub mod schema;
+pub mod synth;
+
+pub use episode::{EncodedImage, EpisodeReader, EpisodeWriter, RawStep, WriterOptions};
+pub use error::{DataError, Result};
+pub use imageio::{Flip, ImageCompression};
+pub use schema::*;
