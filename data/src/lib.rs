@@ -4,11 +4,18 @@
 
 pub mod episode;
 pub mod error;
+pub mod example;
 pub mod imageio;
+pub mod index;
+pub mod rlds;
 pub mod schema;
 pub mod synth;
+pub mod text;
+pub mod tfrecord;
 
 pub use episode::{EncodedImage, EpisodeReader, EpisodeWriter, RawStep, WriterOptions};
 pub use error::{DataError, Result};
 pub use imageio::{Flip, ImageCompression};
+pub use index::{DatasetIndex, EpisodeEntry, IndexOptions, Split, build_index};
 pub use schema::*;
+pub use text::Vocab;
