@@ -12,6 +12,7 @@ pub mod schema;
 pub mod synth;
 pub mod text;
 pub mod tfrecord;
+pub mod window;
 
 pub use episode::{EncodedImage, EpisodeReader, EpisodeWriter, RawStep, WriterOptions};
 pub use error::{DataError, Result};
@@ -19,3 +20,4 @@ pub use imageio::{Flip, ImageCompression};
 pub use index::{DatasetIndex, EpisodeEntry, IndexOptions, Split, build_index};
 pub use schema::*;
 pub use text::Vocab;
+pub use window::{ActionNorm, Augment, WindowConfig, WindowDataset, WindowSample};
