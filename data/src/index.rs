@@ -220,6 +220,19 @@ pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
     Ok(())
 }
 
+/// Gives a temporary file (created 0600) the usual 0644 permissions before it is renamed.
+pub(crate) fn set_readable(file: &std::fs::File, path: &Path) -> Result<()> {
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::PermissionsExt;
+        file.set_permissions(std::fs::Permissions::from_mode(0o644))
+            .map_err(|e| DataError::io(path, e))?;
+    }
+    #[cfg(not(unix))]
+    let _ = (file, path);
+    Ok(())
+}
+
 /// Episode files (`*.mcap`) of a directory, sorted by name.
 pub fn episode_files(dir: &Path) -> Result<Vec<PathBuf>> {
     let mut v = vec![];

@@ -2,6 +2,7 @@
 //! index with action/state statistics, RLDS (TFRecord) import, and windowed training samples
 //! (with Burn `Dataset`/`Batcher` adapters behind the `burn` feature).
 
+pub mod bench;
 pub mod episode;
 pub mod error;
 pub mod example;
@@ -21,3 +22,7 @@ pub use index::{DatasetIndex, EpisodeEntry, IndexOptions, Split, build_index};
 pub use schema::*;
 pub use text::Vocab;
 pub use window::{ActionNorm, Augment, WindowConfig, WindowDataset, WindowSample};
+
+/// Burn `Dataset`/`Batcher` adapters (feature `burn`).
+#[cfg(feature = "burn")]
+pub mod burn_adapter;

@@ -151,3 +151,50 @@ pub fn synthetic_steps(len: usize, seed: u64, o: &SynthOptions) -> Vec<StepRecor
         })
         .collect()
 }
+
+/// Writes `episodes` synthetic episodes to `dir` (even: PNG with segmentation and depth; odd:
+/// JPEG without) and builds the index; returns the episode paths.
+pub fn write_synthetic_dataset(
+    dir: &std::path::Path,
+    episodes: usize,
+    steps: usize,
+    size: u32,
+) -> crate::Result<Vec<std::path::PathBuf>> {
+    use crate::{EpisodeWriter, ImageCompression, IndexOptions, WriterOptions};
+    std::fs::create_dir_all(dir).map_err(|e| crate::DataError::io(dir, e))?;
+    let mut out = vec![];
+    for e in 0..episodes {
+        let even = e % 2 == 0;
+        let o = SynthOptions {
+            size,
+            segmentation: even,
+            depth: even,
+        };
+        let opts = WriterOptions {
+            image_compression: if even {
+                ImageCompression::Png
+            } else {
+                ImageCompression::Jpeg { quality: 90 }
+            },
+            chunk_size: 64 * 1024,
+            ..WriterOptions::default()
+        };
+        let mut w = EpisodeWriter::create(
+            dir.join(format!("synth_{e:03}.mcap")),
+            synthetic_meta(e as u64),
+            opts,
+        )?;
+        for s in synthetic_steps(steps, e as u64, &o) {
+            w.write_step(&s)?;
+        }
+        out.push(w.finish()?);
+    }
+    crate::build_index(
+        dir,
+        &IndexOptions {
+            val_fraction: 0.0,
+            seed: 0,
+        },
+    )?;
+    Ok(out)
+}
