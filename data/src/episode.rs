@@ -844,7 +844,7 @@ impl EpisodeReader {
                     DataError::corrupt(
                         &self.path,
                         off,
-                        format!("chunk at byte offset {off}, record at {rec_off} of its data: {m}"),
+                        format!("chunk: record at {rec_off} of its decompressed data: {m}"),
                     )
                 };
                 if body.len() - pos < 9 {
@@ -889,7 +889,7 @@ impl EpisodeReader {
             DataError::corrupt(
                 &self.path,
                 off,
-                format!("chunk at byte offset {off}: step {k} on `{topic}`: {m}"),
+                format!("chunk: step {k} on `{topic}`: {m}"),
             )
         };
         fn json<T: serde::de::DeserializeOwned>(d: &[u8]) -> Result<T, String> {
@@ -1112,13 +1112,8 @@ impl EpisodeReader {
         let data = &b[49 + name_len..];
         let out = match c.compression.as_str() {
             "" => data.to_vec(),
-            "zstd" => zstd::bulk::decompress(data, c.uncompressed_size as usize).map_err(|e| {
-                DataError::corrupt(
-                    &self.path,
-                    off,
-                    format!("chunk at byte offset {off}: zstd: {e}"),
-                )
-            })?,
+            "zstd" => zstd::bulk::decompress(data, c.uncompressed_size as usize)
+                .map_err(|e| DataError::corrupt(&self.path, off, format!("chunk: zstd: {e}")))?,
             other => {
                 return Err(DataError::schema(
                     &self.path,
@@ -1132,7 +1127,7 @@ impl EpisodeReader {
                 &self.path,
                 off,
                 format!(
-                    "chunk at byte offset {off}: decompressed to {} bytes, header says {}",
+                    "chunk: decompressed to {} bytes, header says {}",
                     out.len(),
                     c.uncompressed_size
                 ),
@@ -1144,9 +1139,7 @@ impl EpisodeReader {
                 return Err(DataError::corrupt(
                     &self.path,
                     off,
-                    format!(
-                        "chunk at byte offset {off}: CRC mismatch (stored {crc:08x}, computed {got:08x})"
-                    ),
+                    format!("chunk: CRC mismatch (stored {crc:08x}, computed {got:08x})"),
                 ));
             }
         }

@@ -96,9 +96,8 @@ fn decode_dynamic(bytes: &[u8], format: &str) -> Result<image::DynamicImage, Str
         "" => image::guess_format(bytes).map_err(|e| format!("unknown image format: {e}"))?,
         other => return Err(format!("unsupported image format `{other}`")),
     };
-    let mut reader = image::ImageReader::with_format(Cursor::new(bytes), fmt);
-    reader.no_limits();
-    reader
+    // The reader's default limits (512 MiB allocation) keep a damaged header from exhausting memory.
+    image::ImageReader::with_format(Cursor::new(bytes), fmt)
         .decode()
         .map_err(|e| format!("image decoding failed: {e}"))
 }
@@ -162,14 +161,19 @@ pub fn apply_flip<T: Copy>(
     }
 }
 
-/// Resizes RGB `[H, W, 3]` to `[h, w, 3]` with a triangle (bilinear) filter; a no-op if equal.
+/// Resizes RGB `[H, W, 3]` to `[h, w, 3]`: area averaging (`image::imageops::thumbnail`) when
+/// shrinking in both directions, a triangle (bilinear) filter otherwise; a no-op if equal.
 pub fn resize_rgb(img: &RgbImage, width: u32, height: u32) -> RgbImage {
     if img.width == width && img.height == height {
         return img.clone();
     }
     let buf = image::RgbImage::from_raw(img.width, img.height, img.data.clone())
         .expect("consistent RGB image");
-    let out = image::imageops::resize(&buf, width, height, image::imageops::FilterType::Triangle);
+    let out = if width <= img.width && height <= img.height {
+        image::imageops::thumbnail(&buf, width, height)
+    } else {
+        image::imageops::resize(&buf, width, height, image::imageops::FilterType::Triangle)
+    };
     RgbImage {
         width,
         height,

@@ -2,6 +2,8 @@
 //! index with action/state statistics, RLDS (TFRecord) import, and windowed training samples
 //! (with Burn `Dataset`/`Batcher` adapters behind the `burn` feature).
 
+#![warn(missing_docs)]
+
 pub mod bench;
 pub mod episode;
 pub mod error;

@@ -42,7 +42,7 @@ pub fn synthetic_meta(seed: u64) -> EpisodeMeta {
 /// `len` smooth, textured, seeded steps: images change slowly over time (like a robot video).
 pub fn synthetic_steps(len: usize, seed: u64, o: &SynthOptions) -> Vec<StepRecord> {
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
-    let phase: f32 = rng.random_range(0.0..6.28);
+    let phase: f32 = rng.random_range(0.0..std::f32::consts::TAU);
     let s = o.size;
     (0..len)
         .map(|k| {

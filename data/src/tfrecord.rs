@@ -9,7 +9,7 @@ use crate::error::{DataError, Result};
 /// TFRecord's masked CRC32C of `data`.
 pub fn masked_crc32c(data: &[u8]) -> u32 {
     let c = crc32c::crc32c(data);
-    ((c >> 15) | (c << 17)).wrapping_add(0xa282_ead8)
+    c.rotate_right(15).wrapping_add(0xa282_ead8)
 }
 
 /// Appends one framed record to `w`.

@@ -16,8 +16,19 @@ import sys
 from collections import defaultdict
 from pathlib import Path
 
+from mcap.decoder import DecoderFactory as McapDecoderFactory
 from mcap.reader import make_reader, NonSeekingReader
 from mcap_protobuf.decoder import DecoderFactory
+
+
+class JsonDecoderFactory(McapDecoderFactory):
+    """Decodes `json` messages whose schema encoding is `jsonschema`."""
+
+    def decoder_for(self, message_encoding, schema):
+        if message_encoding == "json" and schema is not None and schema.encoding == "jsonschema":
+            json.loads(schema.data)  # the schema itself must be valid JSON
+            return json.loads
+        return None
 
 REQUIRED = {
     "/agentview/image": ("foxglove.CompressedImage", "protobuf"),
@@ -38,7 +49,7 @@ MAGIC = {"png": b"\x89PNG", "jpeg": b"\xff\xd8"}
 def check(path: Path) -> list[str]:
     errors = []
     with open(path, "rb") as f:
-        reader = make_reader(f, validate_crcs=True, decoder_factories=[DecoderFactory()])
+        reader = make_reader(f, validate_crcs=True, decoder_factories=[DecoderFactory(), JsonDecoderFactory()])
         summary = reader.get_summary()
         if summary is None:
             return ["no summary section"]
@@ -71,7 +82,7 @@ def check(path: Path) -> list[str]:
             if message.log_time != want_t:
                 errors.append(f"{channel.topic} step {k}: log_time {message.log_time} != {want_t}")
             if channel.message_encoding == "json":
-                body = json.loads(message.data)
+                body = decoded
                 if body.get("step") != k:
                     errors.append(f"{channel.topic}: JSON step {body.get('step')} != sequence {k}")
             elif schema.name == "foxglove.CompressedImage":
