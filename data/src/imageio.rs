@@ -162,14 +162,16 @@ pub fn apply_flip<T: Copy>(
 }
 
 /// Resizes RGB `[H, W, 3]` to `[h, w, 3]`: area averaging (`image::imageops::thumbnail`) when
-/// shrinking in both directions, a triangle (bilinear) filter otherwise; a no-op if equal.
-pub fn resize_rgb(img: &RgbImage, width: u32, height: u32) -> RgbImage {
+/// shrinking in both directions, a triangle (bilinear) filter otherwise; returned as is if equal.
+pub fn resize_rgb(img: RgbImage, width: u32, height: u32) -> RgbImage {
     if img.width == width && img.height == height {
-        return img.clone();
+        return img;
     }
-    let buf = image::RgbImage::from_raw(img.width, img.height, img.data.clone())
-        .expect("consistent RGB image");
-    let out = if width <= img.width && height <= img.height {
+    let (w0, h0) = (img.width, img.height);
+    let Some(buf) = image::RgbImage::from_raw(w0, h0, img.data) else {
+        return RgbImage::zeros(width, height, 3);
+    };
+    let out = if width <= w0 && height <= h0 {
         image::imageops::thumbnail(&buf, width, height)
     } else {
         image::imageops::resize(&buf, width, height, image::imageops::FilterType::Triangle)

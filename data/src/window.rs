@@ -315,7 +315,7 @@ impl WindowDataset {
                 .decode()
                 .map_err(|m| DataError::invalid(r.path(), format!("step {f}: {m}")))?;
             Ok(to_chw(
-                &resize_rgb(&img, c.image_size, c.image_size),
+                &resize_rgb(img, c.image_size, c.image_size),
                 aug.as_ref(),
             ))
         };
