@@ -201,11 +201,24 @@ impl RldsEpisode {
             "steps/language_instruction",
             b(vec![self.instruction.as_bytes().to_vec(); t]),
         );
-        ex.insert("steps/reward", f(self.rewards.clone()));
-        ex.insert("steps/discount", f(self.discounts.clone()));
-        ex.insert("steps/is_first", i(&self.is_first));
-        ex.insert("steps/is_last", i(&self.is_last));
-        ex.insert("steps/is_terminal", i(&self.is_terminal));
+        // Optional per-step lists are written only when present.
+        for (key, v) in [
+            ("steps/reward", &self.rewards),
+            ("steps/discount", &self.discounts),
+        ] {
+            if !v.is_empty() {
+                ex.insert(key, f(v.clone()));
+            }
+        }
+        for (key, v) in [
+            ("steps/is_first", &self.is_first),
+            ("steps/is_last", &self.is_last),
+            ("steps/is_terminal", &self.is_terminal),
+        ] {
+            if !v.is_empty() {
+                ex.insert(key, i(v));
+            }
+        }
         ex.insert(
             "episode_metadata/file_path",
             b(vec![self.file_path.as_bytes().to_vec()]),
