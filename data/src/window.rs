@@ -28,6 +28,9 @@ pub struct Augment {
     pub contrast: f32,
     /// Saturation factor drawn from [1−s, 1+s] (blend with the grey image).
     pub saturation: f32,
+    /// Hue rotation drawn from [−h, h] turns (0.05 = ±18°), applied as a rotation of the
+    /// chroma plane in YIQ space (an approximation of HSV hue shift).
+    pub hue: f32,
     /// Maximum shift in output pixels in x and y (edge pixels repeated).
     pub max_shift: u32,
 }
@@ -38,6 +41,7 @@ impl Default for Augment {
             brightness: 0.2,
             contrast: 0.2,
             saturation: 0.2,
+            hue: 0.05,
             max_shift: 4,
         }
     }
@@ -372,6 +376,7 @@ struct AugParams {
     brightness: f32,
     contrast: f32,
     saturation: f32,
+    hue: f32,
     dx: i64,
     dy: i64,
 }
@@ -390,6 +395,7 @@ impl AugParams {
             brightness: sym(rng, a.brightness),
             contrast: 1.0 + sym(rng, a.contrast),
             saturation: 1.0 + sym(rng, a.saturation),
+            hue: sym(rng, a.hue) * std::f32::consts::TAU,
             dx: if m > 0 { rng.random_range(-m..=m) } else { 0 },
             dy: if m > 0 { rng.random_range(-m..=m) } else { 0 },
         }
@@ -397,7 +403,7 @@ impl AugParams {
 }
 
 /// `[H, W, 3]` u8 → `[3, H, W]` f32 in [0, 1], with optional augmentation
-/// (shift, then brightness, contrast, saturation, then clamp).
+/// (shift, then brightness, contrast, saturation, hue, then clamp).
 fn to_chw(img: &RgbImage, aug: Option<&AugParams>) -> Vec<f32> {
     let (w, h) = (img.width as usize, img.height as usize);
     let hw = w * h;
@@ -424,11 +430,40 @@ fn to_chw(img: &RgbImage, aug: Option<&AugParams>) -> Vec<f32> {
                 *v = (*v - mean) * a.contrast + mean;
             }
         }
+        // Saturation and hue together as one colour matrix: RGB → YIQ, scale and rotate the
+        // chroma (I, Q) plane, back to RGB.
+        const TO_YIQ: [[f32; 3]; 3] = [
+            [0.299, 0.587, 0.114],
+            [0.596, -0.274, -0.322],
+            [0.211, -0.523, 0.312],
+        ];
+        // exact inverse of TO_YIQ (so zero jitter is the identity up to f32 rounding)
+        const TO_RGB: [[f32; 3]; 3] = [
+            [1.0, 0.956_170_7, 0.621_432_6],
+            [1.0, -0.272_688_6, -0.646_813_2],
+            [1.0, -1.103_744_1, 1.700_623_1],
+        ];
+        let (sn, cs) = a.hue.sin_cos();
+        let sat = a.saturation;
+        let chroma = [
+            [1.0, 0.0, 0.0],
+            [0.0, sat * cs, -sat * sn],
+            [0.0, sat * sn, sat * cs],
+        ];
+        let mut m = [[0f32; 3]; 3];
+        for (r, row) in m.iter_mut().enumerate() {
+            for (c, v) in row.iter_mut().enumerate() {
+                *v = (0..3)
+                    .map(|k| {
+                        TO_RGB[r][k] * (0..3).map(|l| chroma[k][l] * TO_YIQ[l][c]).sum::<f32>()
+                    })
+                    .sum();
+            }
+        }
         for i in 0..hw {
-            let grey = 0.299 * out[i] + 0.587 * out[hw + i] + 0.114 * out[2 * hw + i];
-            for ch in 0..3 {
-                let v = &mut out[ch * hw + i];
-                *v = (grey + (*v - grey) * a.saturation).clamp(0.0, 1.0);
+            let p = [out[i], out[hw + i], out[2 * hw + i]];
+            for (ch, row) in m.iter().enumerate() {
+                out[ch * hw + i] = (row[0] * p[0] + row[1] * p[1] + row[2] * p[2]).clamp(0.0, 1.0);
             }
         }
     }

@@ -150,3 +150,45 @@ fn augmentation_is_seeded_and_resize_works() {
     assert_eq!(many[2], a);
     assert!(ds.get(12).is_err());
 }
+
+#[test]
+fn zero_jitter_augmentation_is_identity() {
+    let (dir, _) = dataset(&[5]);
+    let still = Augment {
+        brightness: 0.0,
+        contrast: 0.0,
+        saturation: 0.0,
+        hue: 0.0,
+        max_shift: 0,
+    };
+    let cfg = WindowConfig {
+        past: 1,
+        future: 0,
+        chunk: 1,
+        image_size: 16,
+        augment: Some(still),
+        ..Default::default()
+    };
+    let a = WindowDataset::open(dir.path(), Split::Train, cfg.clone())
+        .unwrap()
+        .get(3)
+        .unwrap();
+    let b = WindowDataset::open(
+        dir.path(),
+        Split::Train,
+        WindowConfig {
+            augment: None,
+            ..cfg
+        },
+    )
+    .unwrap()
+    .get(3)
+    .unwrap();
+    let max = a
+        .images
+        .iter()
+        .zip(&b.images)
+        .map(|(x, y)| (x - y).abs())
+        .fold(0f32, f32::max);
+    assert!(max < 1e-5, "max difference {max}");
+}
