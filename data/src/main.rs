@@ -1,0 +1,298 @@
+//! `data`: inspect episodes, (re)build dataset indexes, import RLDS, benchmark windows.
+
+use std::path::PathBuf;
+use std::process::ExitCode;
+
+use anyhow::Context;
+use clap::{Parser, Subcommand, ValueEnum};
+use data::rlds::{ConvertOptions, FlipChoice};
+use data::{DataError, EpisodeReader, Flip, ImageCompression, IndexOptions, WriterOptions};
+
+#[derive(Parser)]
+#[command(
+    name = "data",
+    version,
+    about = "Episodes on disk: inspect, index, import, bench"
+)]
+struct Cli {
+    #[command(subcommand)]
+    cmd: Cmd,
+}
+
+#[derive(Clone, Copy, ValueEnum)]
+enum FlipArg {
+    /// From the dataset name (libero_mem: none; other libero: hflip).
+    Auto,
+    None,
+    Hflip,
+    Vflip,
+    Rot180,
+}
+
+#[derive(Subcommand)]
+enum Cmd {
+    /// (Re)build DIR/index.json: episode list, lengths, split, action/state statistics.
+    Stats {
+        /// Dataset directory with *.mcap episodes.
+        dir: PathBuf,
+        /// Fraction of episodes in the validation split.
+        #[arg(long, default_value_t = 0.05)]
+        val_fraction: f64,
+        /// Seed of the split.
+        #[arg(long, default_value_t = 0)]
+        seed: u64,
+    },
+    /// Print a human summary of one episode file.
+    Inspect {
+        /// Episode file.
+        file: PathBuf,
+        /// Also verify every chunk (CRC, schema of every message).
+        #[arg(long)]
+        verify: bool,
+    },
+    /// Convert TFDS/RLDS TFRecord shards (OpenVLA LIBERO layout) into a dataset directory.
+    ConvertRlds {
+        /// Directory holding the shards (searched 3 levels deep).
+        #[arg(long)]
+        src: PathBuf,
+        /// Output dataset directory.
+        #[arg(long)]
+        out: PathBuf,
+        /// Transform that makes the stored images upright.
+        #[arg(long, value_enum, default_value_t = FlipArg::Auto)]
+        flip: FlipArg,
+        /// Store frames as PNG (lossless re-encode; files ~6x larger) instead of JPEG.
+        #[arg(long)]
+        png: bool,
+        /// JPEG quality when not --png.
+        #[arg(long, default_value_t = 95)]
+        jpeg_quality: u8,
+        /// Fraction of episodes in the validation split.
+        #[arg(long, default_value_t = 0.05)]
+        val_fraction: f64,
+        /// Worker threads (default: all cores).
+        #[arg(long)]
+        threads: Option<usize>,
+    },
+    /// Write synthetic episodes (seeded; for checks such as the reference-reader validation).
+    Synth {
+        /// Output directory.
+        #[arg(long)]
+        out: PathBuf,
+        /// Number of episodes (even ones: PNG with segmentation and depth; odd ones: JPEG without).
+        #[arg(long, default_value_t = 2)]
+        episodes: usize,
+        /// Steps per episode.
+        #[arg(long, default_value_t = 30)]
+        steps: usize,
+        /// Image side.
+        #[arg(long, default_value_t = 64)]
+        size: u32,
+    },
+    /// Print windows/s for T-frame windows at the given sizes and worker counts.
+    Bench {
+        /// Window length T.
+        #[arg(long, default_value_t = 16)]
+        window: usize,
+        /// Output image sizes.
+        #[arg(long, value_delimiter = ',', default_value = "64,128")]
+        sizes: Vec<u32>,
+        /// Worker counts.
+        #[arg(long, value_delimiter = ',', default_value = "1,2")]
+        workers: Vec<usize>,
+        /// Windows per measurement.
+        #[arg(long, default_value_t = 128)]
+        windows: usize,
+        /// Use this dataset directory instead of a synthetic one (128² JPEG, 4 × 80 steps).
+        #[arg(long)]
+        dir: Option<PathBuf>,
+    },
+}
+
+fn run(cli: Cli) -> anyhow::Result<()> {
+    match cli.cmd {
+        Cmd::Stats {
+            dir,
+            val_fraction,
+            seed,
+        } => {
+            let idx = data::build_index(&dir, &IndexOptions { val_fraction, seed })?;
+            let train = idx.split(data::Split::Train).len();
+            println!(
+                "{}: {} episodes ({} train, {} val), {} train steps, vocabulary {} words",
+                dir.join(data::index::INDEX_FILE).display(),
+                idx.episodes.len(),
+                train,
+                idx.episodes.len() - train,
+                idx.stats.num_transitions,
+                idx.vocab.len()
+            );
+            let a = &idx.stats.action;
+            for d in 0..7 {
+                println!(
+                    "  action[{d}] mean {:+.4} std {:.4} q01 {:+.4} q99 {:+.4} {}",
+                    a.mean[d],
+                    a.std[d],
+                    a.q01[d],
+                    a.q99[d],
+                    if a.mask[d] { "" } else { "(not normalised)" }
+                );
+            }
+        }
+        Cmd::Inspect { file, verify } => {
+            let r = EpisodeReader::open(&file)?;
+            if verify {
+                r.verify()?;
+            }
+            let m = r.meta();
+            println!("{}", file.display());
+            println!(
+                "  size        {} bytes, {} chunks{}",
+                r.file_size(),
+                r.chunk_count(),
+                if verify { ", verified" } else { "" }
+            );
+            println!(
+                "  steps       {} ({:.2} s at {} Hz)",
+                r.len(),
+                r.duration_s(),
+                m.fps
+            );
+            println!("  task        {}", m.task_id);
+            println!("  instruction {}", m.instruction);
+            println!("  seed        {}", m.seed);
+            println!(
+                "  simulator   {} / assets {}",
+                m.sim_version, m.asset_version
+            );
+            println!("  orientation {}", m.image_orientation);
+            println!("  bddl        {} bytes", m.bddl.len());
+            for (k, v) in &m.extra {
+                println!("  extra.{k} = {v}");
+            }
+            println!("  channels:");
+            for c in r.channels() {
+                println!(
+                    "    {:<26} {:<26} {:<9} {:>6} msgs",
+                    c.topic, c.schema, c.encoding, c.count
+                );
+            }
+            if !r.is_empty() {
+                let s = r.read_step(0)?;
+                println!(
+                    "  agentview {}x{}, eye-in-hand {}x{}, {} objects at step 0",
+                    s.agentview.width,
+                    s.agentview.height,
+                    s.eye_in_hand.width,
+                    s.eye_in_hand.height,
+                    s.objects.len()
+                );
+            }
+        }
+        Cmd::ConvertRlds {
+            src,
+            out,
+            flip,
+            png,
+            jpeg_quality,
+            val_fraction,
+            threads,
+        } => {
+            if let Some(n) = threads {
+                rayon::ThreadPoolBuilder::new()
+                    .num_threads(n)
+                    .build_global()
+                    .context("thread pool")?;
+            }
+            let opts = ConvertOptions {
+                flip: match flip {
+                    FlipArg::Auto => FlipChoice::Auto,
+                    FlipArg::None => FlipChoice::Fixed(Flip::None),
+                    FlipArg::Hflip => FlipChoice::Fixed(Flip::Horizontal),
+                    FlipArg::Vflip => FlipChoice::Fixed(Flip::Vertical),
+                    FlipArg::Rot180 => FlipChoice::Fixed(Flip::Rotate180),
+                },
+                writer: WriterOptions {
+                    image_compression: if png {
+                        ImageCompression::Png
+                    } else {
+                        ImageCompression::Jpeg {
+                            quality: jpeg_quality,
+                        }
+                    },
+                    ..WriterOptions::default()
+                },
+                index: IndexOptions {
+                    val_fraction,
+                    seed: 0,
+                },
+                progress: true,
+            };
+            let rep = data::rlds::convert_rlds(&src, &out, &opts)?;
+            println!(
+                "{}: {} shards → {} episodes, {} steps in {} (images: {} applied)",
+                rep.name,
+                rep.shards,
+                rep.episodes,
+                rep.steps,
+                out.display(),
+                rep.flip.name()
+            );
+        }
+        Cmd::Synth {
+            out,
+            episodes,
+            steps,
+            size,
+        } => {
+            let paths = data::synth::write_synthetic_dataset(&out, episodes, steps, size)?;
+            println!(
+                "wrote {} episodes of {steps} steps to {}",
+                paths.len(),
+                out.display()
+            );
+        }
+        Cmd::Bench {
+            window,
+            sizes,
+            workers,
+            windows,
+            dir,
+        } => {
+            let tmp = tempfile::tempdir().context("temporary directory")?;
+            let dir = match dir {
+                Some(d) => d,
+                None => {
+                    data::bench::make_bench_dataset(tmp.path(), 4, 80, 128)?;
+                    tmp.path().to_path_buf()
+                }
+            };
+            println!(
+                "{:>6} {:>6} {:>8} {:>9} {:>12}",
+                "T", "size", "workers", "windows", "windows/s"
+            );
+            for r in data::bench::bench_windows(&dir, window, &sizes, &workers, windows)? {
+                println!(
+                    "{:>6} {:>6} {:>8} {:>9} {:>12.1}",
+                    r.window, r.image_size, r.workers, r.windows, r.windows_per_s
+                );
+            }
+        }
+    }
+    Ok(())
+}
+
+fn main() -> ExitCode {
+    let cli = Cli::parse();
+    match run(cli) {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("error: {e:#}");
+            let code = e
+                .downcast_ref::<DataError>()
+                .map(|d| d.exit_code())
+                .unwrap_or(1);
+            ExitCode::from(code as u8)
+        }
+    }
+}

@@ -1,0 +1,471 @@
+//! Windowed training samples: a sample is (episode, t) → frames t−p … t+q (edge frames repeated,
+//! with a validity mask), the next H_a actions for every frame (normalised with q01/q99, gripper
+//! untouched), states, instruction, subgoal texts and object annotations. Frames are resized and
+//! optionally augmented (seeded colour jitter + small shift, the same for the whole window).
+//! Decoding is lazy (only when a sample is asked for) and parallel (rayon); every distinct frame
+//! of a window is decoded once.
+
+use std::path::Path;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicU64, Ordering};
+
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+use rayon::prelude::*;
+
+use crate::episode::EpisodeReader;
+use crate::error::{DataError, Result};
+use crate::imageio::resize_rgb;
+use crate::index::{DatasetIndex, Split, Stats};
+use crate::schema::{ObjectAnnotation, RgbImage};
+
+/// Seeded photometric and geometric augmentation, applied identically to all frames of a window.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Augment {
+    /// Additive brightness delta drawn from [−b, b] (pixels in [0, 1]), as TF `random_brightness`.
+    pub brightness: f32,
+    /// Contrast factor drawn from [1−c, 1+c] around each channel's mean.
+    pub contrast: f32,
+    /// Saturation factor drawn from [1−s, 1+s] (blend with the grey image).
+    pub saturation: f32,
+    /// Hue rotation drawn from [−h, h] turns (0.05 = ±18°), applied as a rotation of the
+    /// chroma plane in YIQ space (an approximation of HSV hue shift).
+    pub hue: f32,
+    /// Maximum shift in output pixels in x and y (edge pixels repeated).
+    pub max_shift: u32,
+}
+
+impl Default for Augment {
+    fn default() -> Self {
+        Augment {
+            brightness: 0.2,
+            contrast: 0.2,
+            saturation: 0.2,
+            hue: 0.05,
+            max_shift: 4,
+        }
+    }
+}
+
+/// Window configuration.
+#[derive(Clone, Debug, PartialEq)]
+pub struct WindowConfig {
+    /// Past frames p (frames t−p … t−1).
+    pub past: usize,
+    /// Future frames q (frames t+1 … t+q).
+    pub future: usize,
+    /// Action chunk length H_a (actions f … f+H_a−1 for every frame f).
+    pub chunk: usize,
+    /// Output image side (frames are resized to `image_size`²).
+    pub image_size: u32,
+    /// Also produce eye-in-hand frames.
+    pub wrist: bool,
+    /// Augmentation (None = off).
+    pub augment: Option<Augment>,
+    /// Seed of the augmentation.
+    pub seed: u64,
+}
+
+impl Default for WindowConfig {
+    fn default() -> Self {
+        WindowConfig {
+            past: 15,
+            future: 0,
+            chunk: 4,
+            image_size: 64,
+            wrist: false,
+            augment: None,
+            seed: 0,
+        }
+    }
+}
+
+impl WindowConfig {
+    /// Window length T = p + 1 + q.
+    pub fn len(&self) -> usize {
+        self.past + 1 + self.future
+    }
+
+    /// Always false (a window holds at least frame t).
+    pub fn is_empty(&self) -> bool {
+        false
+    }
+}
+
+/// q01/q99 action normalisation (OpenVLA BOUNDS_Q99, model.md §8).
+#[derive(Clone, Debug, PartialEq)]
+pub struct ActionNorm {
+    /// 1st percentiles.
+    pub q01: [f32; 7],
+    /// 99th percentiles.
+    pub q99: [f32; 7],
+    /// Normalised dimensions (the gripper is not).
+    pub mask: [bool; 7],
+}
+
+impl ActionNorm {
+    /// From the index statistics.
+    pub fn from_stats(s: &Stats) -> Result<Self> {
+        let arr = |v: &[f32], what: &str| -> Result<[f32; 7]> {
+            v.try_into().map_err(|_| {
+                DataError::Argument(format!("action {what} has {} values, expected 7", v.len()))
+            })
+        };
+        let m = &s.action.mask;
+        if m.len() != 7 {
+            return Err(DataError::Argument(format!(
+                "action mask has {} values, expected 7",
+                m.len()
+            )));
+        }
+        Ok(ActionNorm {
+            q01: arr(&s.action.q01, "q01")?,
+            q99: arr(&s.action.q99, "q99")?,
+            mask: std::array::from_fn(|i| m[i]),
+        })
+    }
+
+    /// ā = clip(2(a−q01)/(q99−q01+1e-8) − 1, −1, 1) on masked dims; others unchanged.
+    pub fn normalize(&self, a: &[f32; 7]) -> [f32; 7] {
+        std::array::from_fn(|i| {
+            if self.mask[i] {
+                (2.0 * (a[i] - self.q01[i]) / (self.q99[i] - self.q01[i] + 1e-8) - 1.0)
+                    .clamp(-1.0, 1.0)
+            } else {
+                a[i]
+            }
+        })
+    }
+
+    /// Inverse on masked dims: a = 0.5(ā+1)(q99−q01) + q01.
+    pub fn denormalize(&self, a: &[f32; 7]) -> [f32; 7] {
+        std::array::from_fn(|i| {
+            if self.mask[i] {
+                0.5 * (a[i] + 1.0) * (self.q99[i] - self.q01[i]) + self.q01[i]
+            } else {
+                a[i]
+            }
+        })
+    }
+}
+
+/// One training sample.
+#[derive(Clone, Debug, PartialEq)]
+pub struct WindowSample {
+    /// Position of the episode in the index.
+    pub episode: usize,
+    /// Centre step t.
+    pub t: usize,
+    /// Agentview frames `[T, 3, H, W]`, values in [0, 1].
+    pub images: Vec<f32>,
+    /// Eye-in-hand frames `[T, 3, H, W]` when configured.
+    pub wrist_images: Option<Vec<f32>>,
+    /// `[T]`: true where t−p+j lies inside the episode (false = repeated edge frame).
+    pub frame_mask: Vec<bool>,
+    /// `[T]`: the step each window frame was taken from (clamped to the episode).
+    pub frame_steps: Vec<usize>,
+    /// Normalised action chunks `[T, H_a, 7]` (past the end: the last action repeated).
+    pub actions: Vec<f32>,
+    /// `[T, H_a]`: true where the action is a real step, not a repetition past the end.
+    pub action_mask: Vec<bool>,
+    /// States `[T, 8]`.
+    pub states: Vec<f32>,
+    /// The instruction.
+    pub instruction: String,
+    /// `[T]` current subgoal text per frame.
+    pub subgoals: Vec<String>,
+    /// `[T]` object annotations per frame.
+    pub objects: Vec<Vec<ObjectAnnotation>>,
+}
+
+/// Lazily decoding dataset of windows over one split of a dataset directory.
+pub struct WindowDataset {
+    readers: Vec<(usize, Arc<EpisodeReader>)>,
+    samples: Vec<(u32, u32)>,
+    cfg: WindowConfig,
+    norm: ActionNorm,
+    epoch: AtomicU64,
+}
+
+fn mix(mut z: u64) -> u64 {
+    // splitmix64 finaliser
+    z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
+    z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
+    z ^ (z >> 31)
+}
+
+impl WindowDataset {
+    /// Opens the episodes of `split` listed in `dir/index.json`.
+    pub fn open(dir: impl AsRef<Path>, split: Split, cfg: WindowConfig) -> Result<Self> {
+        let dir = dir.as_ref();
+        let index = DatasetIndex::load(dir)?;
+        Self::from_index(dir, &index, split, cfg)
+    }
+
+    /// Like [`WindowDataset::open`] with an index already in memory.
+    pub fn from_index(
+        dir: &Path,
+        index: &DatasetIndex,
+        split: Split,
+        cfg: WindowConfig,
+    ) -> Result<Self> {
+        if cfg.chunk == 0 || cfg.image_size == 0 {
+            return Err(DataError::Argument(
+                "chunk and image_size must be positive".into(),
+            ));
+        }
+        let norm = ActionNorm::from_stats(&index.stats)?;
+        let readers: Vec<(usize, Arc<EpisodeReader>)> = index
+            .split(split)
+            .par_iter()
+            .map(|(i, e)| {
+                let r = EpisodeReader::open(dir.join(&e.file))?;
+                if r.len() != e.length {
+                    return Err(DataError::invalid(
+                        r.path(),
+                        format!(
+                            "has {} steps, index.json says {} (rebuild it with `data stats`)",
+                            r.len(),
+                            e.length
+                        ),
+                    ));
+                }
+                Ok((*i, Arc::new(r)))
+            })
+            .collect::<Result<_>>()?;
+        let samples = readers
+            .iter()
+            .enumerate()
+            .flat_map(|(k, (_, r))| (0..r.len() as u32).map(move |t| (k as u32, t)))
+            .collect();
+        Ok(WindowDataset {
+            readers,
+            samples,
+            cfg,
+            norm,
+            epoch: AtomicU64::new(0),
+        })
+    }
+
+    /// Number of samples (every step of every episode of the split).
+    pub fn len(&self) -> usize {
+        self.samples.len()
+    }
+
+    /// True if there are no samples.
+    pub fn is_empty(&self) -> bool {
+        self.samples.is_empty()
+    }
+
+    /// The configuration.
+    pub fn config(&self) -> &WindowConfig {
+        &self.cfg
+    }
+
+    /// The action normalisation in use.
+    pub fn action_norm(&self) -> &ActionNorm {
+        &self.norm
+    }
+
+    /// Sets the epoch mixed into augmentation seeds (so each epoch sees new augmentations).
+    pub fn set_epoch(&self, epoch: u64) {
+        self.epoch.store(epoch, Ordering::Relaxed);
+    }
+
+    /// Sample `i` with the current epoch.
+    pub fn get(&self, i: usize) -> Result<WindowSample> {
+        self.get_with_epoch(i, self.epoch.load(Ordering::Relaxed))
+    }
+
+    /// Samples `indices`, decoded in parallel on the current rayon pool.
+    pub fn get_many(&self, indices: &[usize]) -> Result<Vec<WindowSample>> {
+        indices.par_iter().map(|&i| self.get(i)).collect()
+    }
+
+    /// Sample `i` with an explicit epoch; same (seed, epoch, i) → same sample, bit for bit.
+    pub fn get_with_epoch(&self, i: usize, epoch: u64) -> Result<WindowSample> {
+        let &(k, t) = self.samples.get(i).ok_or_else(|| {
+            DataError::Argument(format!("sample {i} out of range 0..{}", self.samples.len()))
+        })?;
+        let (episode, r) = &self.readers[k as usize];
+        let (t, n) = (t as usize, r.len());
+        let c = &self.cfg;
+        let tl = c.len();
+        let frame_steps: Vec<usize> = (0..tl)
+            .map(|j| (t as isize - c.past as isize + j as isize).clamp(0, n as isize - 1) as usize)
+            .collect();
+        let frame_mask: Vec<bool> = (0..tl)
+            .map(|j| {
+                let s = t as isize - c.past as isize + j as isize;
+                s >= 0 && s < n as isize
+            })
+            .collect();
+        let lo = frame_steps[0];
+        let hi = frame_steps[tl - 1];
+        let last = (hi + c.chunk - 1).min(n - 1);
+        let raw = r.read_raw_steps(lo..last + 1)?;
+
+        let mut rng = ChaCha8Rng::seed_from_u64(mix(c.seed ^ mix(epoch ^ mix(i as u64))));
+        let aug = c.augment.as_ref().map(|a| AugParams::draw(a, &mut rng));
+        let s = c.image_size as usize;
+        let decode = |which: bool, f: usize| -> Result<Vec<f32>> {
+            let st = &raw[f - lo];
+            let enc = if which {
+                &st.eye_in_hand
+            } else {
+                &st.agentview
+            };
+            let img = enc
+                .decode()
+                .map_err(|m| DataError::invalid(r.path(), format!("step {f}: {m}")))?;
+            Ok(to_chw(
+                &resize_rgb(img, c.image_size, c.image_size),
+                aug.as_ref(),
+            ))
+        };
+        let frames = |which: bool| -> Result<Vec<f32>> {
+            let decoded: Vec<Vec<f32>> = (lo..=hi)
+                .into_par_iter()
+                .map(|f| decode(which, f))
+                .collect::<Result<_>>()?;
+            let mut out = Vec::with_capacity(tl * 3 * s * s);
+            for &f in &frame_steps {
+                out.extend_from_slice(&decoded[f - lo]);
+            }
+            Ok(out)
+        };
+        let images = frames(false)?;
+        let wrist_images = if c.wrist { Some(frames(true)?) } else { None };
+        let mut actions = Vec::with_capacity(tl * c.chunk * 7);
+        let mut action_mask = Vec::with_capacity(tl * c.chunk);
+        let mut states = Vec::with_capacity(tl * 8);
+        for &f in &frame_steps {
+            for h in 0..c.chunk {
+                let a = (f + h).min(n - 1);
+                actions.extend(self.norm.normalize(&raw[a - lo].action));
+                action_mask.push(f + h < n);
+            }
+            states.extend(raw[f - lo].state);
+        }
+        Ok(WindowSample {
+            episode: *episode,
+            t,
+            images,
+            wrist_images,
+            frame_mask,
+            actions,
+            action_mask,
+            states,
+            instruction: r.meta().instruction.clone(),
+            subgoals: frame_steps
+                .iter()
+                .map(|&f| raw[f - lo].progress.current_subgoal.clone())
+                .collect(),
+            objects: frame_steps
+                .iter()
+                .map(|&f| raw[f - lo].objects.clone())
+                .collect(),
+            frame_steps,
+        })
+    }
+}
+
+/// Augmentation parameters drawn once per window.
+#[derive(Clone, Debug)]
+struct AugParams {
+    brightness: f32,
+    contrast: f32,
+    saturation: f32,
+    hue: f32,
+    dx: i64,
+    dy: i64,
+}
+
+impl AugParams {
+    fn draw(a: &Augment, rng: &mut ChaCha8Rng) -> Self {
+        let sym = |rng: &mut ChaCha8Rng, r: f32| {
+            if r > 0.0 {
+                rng.random_range(-r..=r)
+            } else {
+                0.0
+            }
+        };
+        let m = a.max_shift as i64;
+        AugParams {
+            brightness: sym(rng, a.brightness),
+            contrast: 1.0 + sym(rng, a.contrast),
+            saturation: 1.0 + sym(rng, a.saturation),
+            hue: sym(rng, a.hue) * std::f32::consts::TAU,
+            dx: if m > 0 { rng.random_range(-m..=m) } else { 0 },
+            dy: if m > 0 { rng.random_range(-m..=m) } else { 0 },
+        }
+    }
+}
+
+/// `[H, W, 3]` u8 → `[3, H, W]` f32 in [0, 1], with optional augmentation
+/// (shift, then brightness, contrast, saturation, hue, then clamp).
+fn to_chw(img: &RgbImage, aug: Option<&AugParams>) -> Vec<f32> {
+    let (w, h) = (img.width as usize, img.height as usize);
+    let hw = w * h;
+    let mut out = vec![0f32; 3 * hw];
+    let (dx, dy) = aug.map(|a| (a.dx, a.dy)).unwrap_or((0, 0));
+    for y in 0..h {
+        let sy = (y as i64 + dy).clamp(0, h as i64 - 1) as usize;
+        for x in 0..w {
+            let sx = (x as i64 + dx).clamp(0, w as i64 - 1) as usize;
+            let p = (sy * w + sx) * 3;
+            for ch in 0..3 {
+                out[ch * hw + y * w + x] = img.data[p + ch] as f32 / 255.0;
+            }
+        }
+    }
+    if let Some(a) = aug {
+        for v in out.iter_mut() {
+            *v += a.brightness;
+        }
+        for ch in 0..3 {
+            let plane = &mut out[ch * hw..(ch + 1) * hw];
+            let mean = plane.iter().sum::<f32>() / hw as f32;
+            for v in plane.iter_mut() {
+                *v = (*v - mean) * a.contrast + mean;
+            }
+        }
+        // Saturation and hue together as one colour matrix: RGB → YIQ, scale and rotate the
+        // chroma (I, Q) plane, back to RGB.
+        const TO_YIQ: [[f32; 3]; 3] = [
+            [0.299, 0.587, 0.114],
+            [0.596, -0.274, -0.322],
+            [0.211, -0.523, 0.312],
+        ];
+        // exact inverse of TO_YIQ (so zero jitter is the identity up to f32 rounding)
+        const TO_RGB: [[f32; 3]; 3] = [
+            [1.0, 0.956_170_7, 0.621_432_6],
+            [1.0, -0.272_688_6, -0.646_813_2],
+            [1.0, -1.103_744_1, 1.700_623_1],
+        ];
+        let (sn, cs) = a.hue.sin_cos();
+        let sat = a.saturation;
+        let chroma = [
+            [1.0, 0.0, 0.0],
+            [0.0, sat * cs, -sat * sn],
+            [0.0, sat * sn, sat * cs],
+        ];
+        let mut m = [[0f32; 3]; 3];
+        for (r, row) in m.iter_mut().enumerate() {
+            for (c, v) in row.iter_mut().enumerate() {
+                *v = (0..3)
+                    .map(|k| {
+                        TO_RGB[r][k] * (0..3).map(|l| chroma[k][l] * TO_YIQ[l][c]).sum::<f32>()
+                    })
+                    .sum();
+            }
+        }
+        for i in 0..hw {
+            let p = [out[i], out[hw + i], out[2 * hw + i]];
+            for (ch, row) in m.iter().enumerate() {
+                out[ch * hw + i] = (row[0] * p[0] + row[1] * p[1] + row[2] * p[2]).clamp(0.0, 1.0);
+            }
+        }
+    }
+    out
+}

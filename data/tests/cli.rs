@@ -1,0 +1,84 @@
+//! The `data` binary: subcommands, messages and exit codes.
+
+use std::process::Command;
+
+fn data() -> Command {
+    Command::new(env!("CARGO_BIN_EXE_data"))
+}
+
+#[test]
+fn synth_stats_inspect_and_bad_input_exit_codes() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = data()
+        .args(["synth", "--out"])
+        .arg(dir.path())
+        .args(["--episodes", "2", "--steps", "8", "--size", "16"])
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let out = data()
+        .arg("stats")
+        .arg(dir.path())
+        .args(["--val-fraction", "0"])
+        .output()
+        .unwrap();
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(out.status.success());
+    assert!(
+        text.contains("2 episodes (2 train, 0 val), 16 train steps"),
+        "{text}"
+    );
+    let ep = dir.path().join("synth_000.mcap");
+    let out = data()
+        .arg("inspect")
+        .arg(&ep)
+        .arg("--verify")
+        .output()
+        .unwrap();
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(out.status.success());
+    for want in [
+        "steps       8 (0.40 s at 20 Hz)",
+        "/agentview/image",
+        "foxglove.CompressedImage",
+        "/agentview/depth",
+        "libero_mem/t1",
+        "verified",
+    ] {
+        assert!(text.contains(want), "missing {want:?} in\n{text}");
+    }
+    // truncated copy: one error line naming the file and an offset, exit code 2
+    let bytes = std::fs::read(&ep).unwrap();
+    let cut = dir.path().join("cut.mcap");
+    std::fs::write(&cut, &bytes[..bytes.len() / 2]).unwrap();
+    let out = data().arg("inspect").arg(&cut).output().unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(2), "{err}");
+    assert!(
+        err.starts_with("error: ") && err.contains("cut.mcap") && err.contains("byte offset"),
+        "{err}"
+    );
+    assert_eq!(err.lines().count(), 1, "{err}");
+    // missing file: exit 2 too
+    let out = data()
+        .arg("inspect")
+        .arg(dir.path().join("nope.mcap"))
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(2));
+    // empty source directory for convert-rlds
+    let empty = tempfile::tempdir().unwrap();
+    let out = data()
+        .args(["convert-rlds", "--src"])
+        .arg(empty.path())
+        .arg("--out")
+        .arg(dir.path().join("x"))
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("no TFRecord shards"));
+}

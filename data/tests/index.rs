@@ -1,0 +1,75 @@
+//! Dataset index: statistics as numpy/OpenVLA compute them, split, determinism.
+
+use data::index::{ArrayStats, quantile_sorted};
+use data::synth::{SynthOptions, synthetic_meta, synthetic_steps};
+use data::*;
+
+#[test]
+fn quantiles_match_numpy_linear() {
+    // numpy.quantile([1, 2, 3, 4], 0.01) = 1.03; 0.99 → 3.97
+    let v = [1.0, 2.0, 3.0, 4.0];
+    assert!((quantile_sorted(&v, 0.01) - 1.03).abs() < 1e-12);
+    assert!((quantile_sorted(&v, 0.99) - 3.97).abs() < 1e-12);
+    assert_eq!(quantile_sorted(&[5.0], 0.99), 5.0);
+    let rows: Vec<[f32; 2]> = (0..101).map(|i| [i as f32, -(i as f32)]).collect();
+    let s = ArrayStats::compute(&rows, [true, false]);
+    assert_eq!(s.q01, vec![1.0, -99.0]);
+    assert_eq!(s.q99, vec![99.0, -1.0]);
+    assert_eq!(s.mean, vec![50.0, -50.0]);
+    assert_eq!(s.min, vec![0.0, -100.0]);
+    // population std of 0..=100 = sqrt(850)
+    assert!((s.std[0] - 850f32.sqrt()).abs() < 1e-4);
+}
+
+#[test]
+fn index_build_is_deterministic_and_splits() {
+    let dir = tempfile::tempdir().unwrap();
+    for e in 0..6u64 {
+        let steps = synthetic_steps(
+            10 + e as usize,
+            e,
+            &SynthOptions {
+                size: 8,
+                segmentation: false,
+                depth: false,
+            },
+        );
+        let mut w = EpisodeWriter::create(
+            dir.path().join(format!("ep{e}.mcap")),
+            synthetic_meta(e),
+            WriterOptions::default(),
+        )
+        .unwrap();
+        for s in &steps {
+            w.write_step(s).unwrap();
+        }
+        w.finish().unwrap();
+    }
+    let opts = IndexOptions {
+        val_fraction: 0.34,
+        seed: 3,
+    };
+    let a = build_index(dir.path(), &opts).unwrap();
+    let text_a = std::fs::read(dir.path().join("index.json")).unwrap();
+    let b = build_index(dir.path(), &opts).unwrap();
+    assert_eq!(a, b);
+    assert_eq!(
+        text_a,
+        std::fs::read(dir.path().join("index.json")).unwrap()
+    );
+    assert_eq!(DatasetIndex::load(dir.path()).unwrap(), a);
+    assert_eq!(a.split(Split::Val).len(), 2);
+    assert_eq!(a.split(Split::Train).len(), 4);
+    let train_steps: usize = a.split(Split::Train).iter().map(|(_, e)| e.length).sum();
+    assert_eq!(a.stats.num_transitions, train_steps);
+    assert_eq!(
+        a.episodes.iter().map(|e| e.length).collect::<Vec<_>>(),
+        vec![10, 11, 12, 13, 14, 15]
+    );
+    let v = a.vocab();
+    assert_eq!(&v.words()[..2], &["<pad>".to_string(), "<unk>".to_string()]);
+    let (ids, mask) = v.encode("Put the bowl on the zebra", 8);
+    assert_eq!(ids[5], data::text::UNK);
+    assert_eq!(mask, vec![true, true, true, true, true, true, false, false]);
+    assert_eq!(v.words()[ids[0] as usize], "put");
+}

@@ -1,0 +1,194 @@
+//! Windows: edge padding, action chunks, normalisation, determinism of augmentation.
+
+use data::synth::{SynthOptions, synthetic_meta, synthetic_steps};
+use data::window::ActionNorm;
+use data::*;
+
+fn dataset(lens: &[usize]) -> (tempfile::TempDir, Vec<Vec<StepRecord>>) {
+    let dir = tempfile::tempdir().unwrap();
+    let mut all = vec![];
+    for (e, &n) in lens.iter().enumerate() {
+        let steps = synthetic_steps(
+            n,
+            e as u64,
+            &SynthOptions {
+                size: 16,
+                segmentation: false,
+                depth: false,
+            },
+        );
+        let mut w = EpisodeWriter::create(
+            dir.path().join(format!("ep{e}.mcap")),
+            synthetic_meta(e as u64),
+            WriterOptions::default(),
+        )
+        .unwrap();
+        for s in &steps {
+            w.write_step(s).unwrap();
+        }
+        w.finish().unwrap();
+        all.push(steps);
+    }
+    build_index(
+        dir.path(),
+        &IndexOptions {
+            val_fraction: 0.0,
+            seed: 0,
+        },
+    )
+    .unwrap();
+    (dir, all)
+}
+
+#[test]
+fn normalisation_is_exact() {
+    let n = ActionNorm {
+        q01: [0.0, -1.0, -2.0, 0.0, 0.0, 0.0, 0.0],
+        q99: [2.0, 1.0, 2.0, 1.0, 1.0, 1.0, 1.0],
+        mask: [true, true, true, true, true, true, false],
+    };
+    let a = [1.5, 0.25, 3.0, -5.0, 0.5, 0.0, -1.0];
+    assert_eq!(n.normalize(&a), [0.5, 0.25, 1.0, -1.0, 0.0, -1.0, -1.0]);
+    assert_eq!(
+        n.denormalize(&[0.5, 0.25, 1.0, -1.0, 0.0, -1.0, -1.0]),
+        [1.5, 0.25, 2.0, 0.0, 0.5, 0.0, -1.0]
+    );
+}
+
+#[test]
+fn edge_frames_are_repeated_with_mask() {
+    let (dir, eps) = dataset(&[10, 7]);
+    let cfg = WindowConfig {
+        past: 3,
+        future: 2,
+        chunk: 3,
+        image_size: 16,
+        ..Default::default()
+    };
+    let ds = WindowDataset::open(dir.path(), Split::Train, cfg).unwrap();
+    assert_eq!(ds.len(), 17);
+    let norm = ds.action_norm().clone();
+    // first step of episode 0
+    let s = ds.get(0).unwrap();
+    assert_eq!((s.episode, s.t), (0, 0));
+    assert_eq!(s.frame_steps, vec![0, 0, 0, 0, 1, 2]);
+    assert_eq!(s.frame_mask, vec![false, false, false, true, true, true]);
+    assert_eq!(s.images.len(), 6 * 3 * 16 * 16);
+    // image of frame j = step frame_steps[j], [3, H, W] in [0, 1], exact (PNG, no resize)
+    let hw = 16 * 16;
+    for j in 0..6 {
+        let src = &eps[0][s.frame_steps[j]].agentview;
+        let px = 5 * 16 + 7;
+        for ch in 0..3 {
+            assert_eq!(
+                s.images[j * 3 * hw + ch * hw + px],
+                src.data[px * 3 + ch] as f32 / 255.0
+            );
+        }
+    }
+    // last step of episode 0
+    let s = ds.get(9).unwrap();
+    assert_eq!(s.frame_steps, vec![6, 7, 8, 9, 9, 9]);
+    assert_eq!(s.frame_mask, vec![true, true, true, true, false, false]);
+    // chunks: frame 8 → actions 8, 9, 9 (mask T, T, F); frame 9 → 9, 9, 9 (T, F, F)
+    let chunk = |j: usize, h: usize| &s.actions[(j * 3 + h) * 7..(j * 3 + h + 1) * 7];
+    assert_eq!(chunk(2, 0), norm.normalize(&eps[0][8].action));
+    assert_eq!(chunk(2, 1), norm.normalize(&eps[0][9].action));
+    assert_eq!(chunk(2, 2), norm.normalize(&eps[0][9].action));
+    assert_eq!(
+        &s.action_mask[6..12],
+        &[true, true, false, true, false, false]
+    );
+    assert_eq!(&s.states[3 * 8..4 * 8], &eps[0][9].state);
+    assert_eq!(s.subgoals[0], eps[0][6].progress.current_subgoal);
+    assert_eq!(s.objects[3], eps[0][9].objects);
+    // gripper untouched by normalisation
+    assert_eq!(chunk(0, 0)[6], eps[0][6].action[6]);
+    // second episode, middle
+    let s = ds.get(10 + 4).unwrap();
+    assert_eq!((s.episode, s.t), (1, 4));
+    assert_eq!(s.frame_steps, vec![1, 2, 3, 4, 5, 6]);
+    assert!(s.frame_mask.iter().all(|m| *m));
+}
+
+#[test]
+fn augmentation_is_seeded_and_resize_works() {
+    let (dir, _) = dataset(&[12]);
+    let cfg = WindowConfig {
+        past: 4,
+        future: 0,
+        chunk: 2,
+        image_size: 8,
+        augment: Some(Augment::default()),
+        seed: 5,
+        ..Default::default()
+    };
+    let ds = WindowDataset::open(dir.path(), Split::Train, cfg.clone()).unwrap();
+    let a = ds.get_with_epoch(6, 0).unwrap();
+    assert_eq!(a.images.len(), 5 * 3 * 8 * 8);
+    assert!(a.images.iter().all(|v| (0.0..=1.0).contains(v)));
+    let ds2 = WindowDataset::open(dir.path(), Split::Train, cfg.clone()).unwrap();
+    assert_eq!(
+        ds2.get_with_epoch(6, 0).unwrap(),
+        a,
+        "same seed → same sample"
+    );
+    let b = ds.get_with_epoch(6, 1).unwrap();
+    assert_ne!(a.images, b.images, "another epoch → another augmentation");
+    let ds3 = WindowDataset::open(
+        dir.path(),
+        Split::Train,
+        WindowConfig {
+            augment: None,
+            ..cfg
+        },
+    )
+    .unwrap();
+    assert_ne!(ds3.get(6).unwrap().images, a.images);
+    // parallel batch equals sequential samples
+    let many = ds.get_many(&[0, 3, 6, 11]).unwrap();
+    assert_eq!(many[2], a);
+    assert!(ds.get(12).is_err());
+}
+
+#[test]
+fn zero_jitter_augmentation_is_identity() {
+    let (dir, _) = dataset(&[5]);
+    let still = Augment {
+        brightness: 0.0,
+        contrast: 0.0,
+        saturation: 0.0,
+        hue: 0.0,
+        max_shift: 0,
+    };
+    let cfg = WindowConfig {
+        past: 1,
+        future: 0,
+        chunk: 1,
+        image_size: 16,
+        augment: Some(still),
+        ..Default::default()
+    };
+    let a = WindowDataset::open(dir.path(), Split::Train, cfg.clone())
+        .unwrap()
+        .get(3)
+        .unwrap();
+    let b = WindowDataset::open(
+        dir.path(),
+        Split::Train,
+        WindowConfig {
+            augment: None,
+            ..cfg
+        },
+    )
+    .unwrap()
+    .get(3)
+    .unwrap();
+    let max = a
+        .images
+        .iter()
+        .zip(&b.images)
+        .map(|(x, y)| (x - y).abs())
+        .fold(0f32, f32::max);
+    assert!(max < 1e-5, "max difference {max}");
+}
