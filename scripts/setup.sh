@@ -12,6 +12,7 @@ PACKAGES=(
   libgl-dev        # unversioned libGL.so, which MuJoCo's GL loader opens
   libgl1-mesa-dri  # Mesa's llvmpipe software rasteriser (CPU rendering)
   ca-certificates  # cargo talks to crates.io over TLS
+  python3-venv     # a throwaway venv for the reference MCAP reader used by the tests
 )
 
 missing=()

@@ -3,4 +3,11 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 bash scripts/setup.sh
-cargo test --workspace --no-fail-fast 2>&1
+# The reference MCAP reader (PyPI `mcap`) checks that our episode files open in other tools.
+venv=target/mcap-venv
+if ! "$venv/bin/python" -c "import mcap, mcap_protobuf, zstandard" 2>/dev/null; then
+  python3 -m venv "$venv"
+  "$venv/bin/pip" install -q "mcap==1.6.0" "mcap-protobuf-support==0.6.0" "zstandard==0.25.0"
+fi
+export DATA_MCAP_PYTHON="$PWD/$venv/bin/python"
+cargo test --workspace --features data/burn --no-fail-fast 2>&1
