@@ -16,5 +16,6 @@ pub use env::{Env, EnvConfig, EnvError, GoalStatus, Observation};
 pub mod assets;
 pub mod bench;
 pub mod predicates;
+pub mod record;
 pub mod scene;
 pub mod sheet;

@@ -1,0 +1,280 @@
+//! Episode recording: an [`Env`] rollout → one mcap episode through the `data` crate's writer.
+//!
+//! Each record pairs the observation at step t with the action taken there and the goal progress after
+//! it. Per-object annotations come from the agentview segmentation (instance id = index of the object or
+//! fixture in the scene + 1, 0 for background, table and robot), with LIBERO-Mem's subgoal labels: every
+//! object starts at `"0"`; when a new subgoal is satisfied, each object the fingers touched in more than 20
+//! contact-steps since the previous one receives that subgoal's text (the reference's `TrajectoryRecorder`).
+
+use std::path::{Path, PathBuf};
+
+use data::{
+    DepthImage, EpisodeMeta, EpisodeWriter, GoalProgress, Image, ObjectAnnotation, RgbImage,
+    Segmentation, StepRecord, WriterOptions,
+};
+
+use crate::env::{Env, Observation};
+use crate::mujoco::ObjType;
+use crate::task::TaskSpec;
+
+/// Contacts (summed over control steps) after which a touched object receives the next subgoal label.
+pub const TOUCH_THRESHOLD: u32 = 20;
+
+/// Version string stored in every episode's metadata.
+pub const SIM_VERSION: &str = concat!(
+    "libero-mem-rs sim ",
+    env!("CARGO_PKG_VERSION"),
+    " (MuJoCo 2.2.2)"
+);
+/// Version of the built-in asset library.
+pub const ASSET_VERSION: &str = "primitives-1";
+
+/// Errors while recording.
+#[derive(Debug, thiserror::Error)]
+pub enum RecordError {
+    /// The data crate failed to write.
+    #[error(transparent)]
+    Data(#[from] data::DataError),
+    /// The environment is not a task environment with cameras and segmentation.
+    #[error("cannot record: {0}")]
+    Setup(String),
+}
+
+/// Writes one episode step by step.
+pub struct Recorder {
+    writer: EpisodeWriter,
+    labels: Vec<String>,
+    touches: Vec<u32>,
+    finger_geoms: Vec<usize>,
+    satisfied_seen: usize,
+    step: u64,
+}
+
+impl Recorder {
+    /// Starts an episode file at `path` for `task` run with `seed` in `env` (which must render with
+    /// segmentation on).
+    pub fn create(
+        path: &Path,
+        env: &Env,
+        task: &TaskSpec,
+        seed: u64,
+        opts: WriterOptions,
+    ) -> Result<Recorder, RecordError> {
+        let scene = env
+            .scene()
+            .ok_or_else(|| RecordError::Setup("the environment has no task scene".into()))?;
+        if !env.config().render || !env.config().segmentation {
+            return Err(RecordError::Setup(
+                "the environment must render with segmentation on".into(),
+            ));
+        }
+        let model = env.model();
+        let finger_geoms = (0..model.ngeom())
+            .filter(|&g| {
+                model
+                    .name(ObjType::Geom, g)
+                    .is_some_and(|n| n.starts_with("gripper0_finger"))
+            })
+            .collect();
+        let mut meta = EpisodeMeta {
+            task_id: task.id.clone(),
+            instruction: task.instruction.clone(),
+            bddl: task.bddl_text.clone(),
+            seed,
+            sim_version: SIM_VERSION.into(),
+            asset_version: ASSET_VERSION.into(),
+            ..EpisodeMeta::default()
+        };
+        meta.extra
+            .insert("goal_len".into(), task.goal_len.to_string());
+        meta.extra
+            .insert("max_steps".into(), task.max_steps.to_string());
+        meta.extra.insert(
+            "instances".into(),
+            scene
+                .instances
+                .iter()
+                .map(|i| i.name.as_str())
+                .collect::<Vec<_>>()
+                .join(","),
+        );
+        Ok(Recorder {
+            writer: EpisodeWriter::create(path, meta, opts)?,
+            labels: vec!["0".into(); scene.instances.len()],
+            touches: vec![0; scene.instances.len()],
+            finger_geoms,
+            satisfied_seen: 0,
+            step: 0,
+        })
+    }
+
+    /// Records `obs` (the observation the action was chosen from), the `action`, and the progress
+    /// reported by `next` (the observation after the step). Call after `env.step` returned `next`.
+    pub fn record(
+        &mut self,
+        env: &Env,
+        obs: &Observation,
+        action: [f32; 7],
+        next: &Observation,
+    ) -> Result<(), RecordError> {
+        let scene = env
+            .scene()
+            .ok_or_else(|| RecordError::Setup("no task scene".into()))?;
+        // Finger contacts during this step (counted on the state after it, once per control step).
+        for c in env.data().contacts() {
+            let other = if self.finger_geoms.contains(&c.geom1) {
+                c.geom2
+            } else if self.finger_geoms.contains(&c.geom2) {
+                c.geom1
+            } else {
+                continue;
+            };
+            if let Some(i) = scene
+                .instances
+                .iter()
+                .position(|inst| inst.geoms.contains(&other))
+            {
+                self.touches[i] += 1;
+            }
+        }
+        let goal = next.goal.clone().unwrap_or(crate::env::GoalStatus {
+            satisfied: 0,
+            goal_len: 0,
+            done: false,
+            failed: false,
+            pending: None,
+            satisfied_texts: Vec::new(),
+        });
+        if goal.satisfied > self.satisfied_seen {
+            let text = goal.satisfied_texts.last().cloned().unwrap_or_default();
+            for (label, t) in self.labels.iter_mut().zip(&self.touches) {
+                if *t > TOUCH_THRESHOLD {
+                    *label = text.clone();
+                }
+            }
+            self.touches.iter_mut().for_each(|t| *t = 0);
+            self.satisfied_seen = goal.satisfied;
+        }
+
+        let s = obs.image_size as u32;
+        let rgb = |v: &[u8]| -> Result<RgbImage, RecordError> {
+            if v.len() != (3 * s * s) as usize {
+                return Err(RecordError::Setup(
+                    "observation images do not match the image size".into(),
+                ));
+            }
+            Ok(RgbImage {
+                width: s,
+                height: s,
+                channels: 3,
+                data: v.to_vec(),
+            })
+        };
+        let seg = obs
+            .agentview_segmentation
+            .as_ref()
+            .ok_or_else(|| RecordError::Setup("no segmentation".into()))?;
+        // Top-level body id → instance id (index + 1), everything else 0.
+        let ids: Vec<u16> = seg
+            .iter()
+            .map(|&b| {
+                if b < 0 {
+                    0
+                } else {
+                    scene
+                        .instances
+                        .iter()
+                        .position(|i| i.root_body == b as usize)
+                        .map_or(0, |k| k as u16 + 1)
+                }
+            })
+            .collect();
+        let objects = annotations(scene, &ids, s as usize, &self.labels);
+        let record = StepRecord {
+            step: self.step,
+            agentview: rgb(&obs.agentview_rgb)?,
+            eye_in_hand: rgb(&obs.eye_in_hand_rgb)?,
+            segmentation: Some(Segmentation::U16(Image {
+                width: s,
+                height: s,
+                channels: 1,
+                data: ids,
+            })),
+            depth: obs.agentview_depth.as_ref().map(|d| DepthImage {
+                width: s,
+                height: s,
+                channels: 1,
+                data: d.clone(),
+            }),
+            state: obs.state,
+            joint_state: obs.joint_state,
+            action,
+            objects,
+            progress: GoalProgress {
+                satisfied: goal.satisfied as u32,
+                total: goal.goal_len as u32,
+                satisfied_subgoals: goal.satisfied_texts.clone(),
+                current_subgoal: goal.pending.clone().unwrap_or_default(),
+            },
+        };
+        self.writer.write_step(&record)?;
+        self.step += 1;
+        Ok(())
+    }
+
+    /// Steps written so far.
+    pub fn steps(&self) -> u64 {
+        self.step
+    }
+
+    /// Closes the file under its final name. Dropping a recorder instead leaves no file behind.
+    pub fn finish(self) -> Result<PathBuf, RecordError> {
+        Ok(self.writer.finish()?)
+    }
+}
+
+/// Boxes and visibility of every instance from an instance-id map `[S, S]`.
+fn annotations(
+    scene: &crate::scene::Scene,
+    ids: &[u16],
+    s: usize,
+    labels: &[String],
+) -> Vec<ObjectAnnotation> {
+    let n = scene.instances.len();
+    let mut lo = vec![(usize::MAX, usize::MAX); n];
+    let mut hi = vec![(0usize, 0usize); n];
+    let mut seen = vec![false; n];
+    for (p, &id) in ids.iter().enumerate() {
+        if id == 0 {
+            continue;
+        }
+        let k = id as usize - 1;
+        let (y, x) = (p / s, p % s);
+        seen[k] = true;
+        lo[k] = (lo[k].0.min(x), lo[k].1.min(y));
+        hi[k] = (hi[k].0.max(x), hi[k].1.max(y));
+    }
+    scene
+        .instances
+        .iter()
+        .enumerate()
+        .map(|(k, inst)| ObjectAnnotation {
+            instance_id: k as i32 + 1,
+            name: inst.name.clone(),
+            bbox: if seen[k] {
+                let (x0, y0) = lo[k];
+                let (x1, y1) = hi[k];
+                [
+                    x0 as f32 / s as f32,
+                    y0 as f32 / s as f32,
+                    (x1 + 1 - x0) as f32 / s as f32,
+                    (y1 + 1 - y0) as f32 / s as f32,
+                ]
+            } else {
+                [0.0; 4]
+            },
+            visible: seen[k],
+            subgoal_label: labels[k].clone(),
+        })
+        .collect()
+}
