@@ -196,7 +196,7 @@ mod tests {
 
     #[test]
     fn gru_cell_matches_hand_computation() {
-        let device = test_device();
+        let (_guard, device) = test_device();
         let cell = GruCell::new(2, 1, &device);
         // Write known weights: all input weights 1, hidden weights 0.5, biases 0.
         let w_in = Tensor::<2>::ones([2, 3], &device);
@@ -204,11 +204,17 @@ mod tests {
         let cell = GruCell {
             input: Linear {
                 weight: burn::module::Param::from_tensor(w_in),
-                bias: Some(burn::module::Param::from_tensor(Tensor::zeros([3], &device))),
+                bias: Some(burn::module::Param::from_tensor(Tensor::zeros(
+                    [3],
+                    &device,
+                ))),
             },
             hidden: Linear {
                 weight: burn::module::Param::from_tensor(w_h),
-                bias: Some(burn::module::Param::from_tensor(Tensor::zeros([3], &device))),
+                bias: Some(burn::module::Param::from_tensor(Tensor::zeros(
+                    [3],
+                    &device,
+                ))),
             },
             d: cell.d,
         };
@@ -226,12 +232,28 @@ mod tests {
 
     #[test]
     fn blocks_keep_shapes() {
-        let device = test_device();
+        let (_guard, device) = test_device();
         let x = Tensor::<3>::random([2, 5, 8], burn::tensor::Distribution::Default, &device);
         let kv = Tensor::<3>::random([2, 3, 8], burn::tensor::Distribution::Default, &device);
-        assert_eq!(SelfAttnBlock::new(8, 2, &device).forward(x.clone(), None).dims(), [2, 5, 8]);
-        assert_eq!(CrossAttnBlock::new(8, 2, &device).forward(x.clone(), kv).dims(), [2, 5, 8]);
-        assert_eq!(FfnBlock::new(8, 32, &device).forward(x.clone()).dims(), [2, 5, 8]);
-        assert_eq!(Mlp::new(8, 16, 3, Act::Relu, &device).forward(x).dims(), [2, 5, 3]);
+        assert_eq!(
+            SelfAttnBlock::new(8, 2, &device)
+                .forward(x.clone(), None)
+                .dims(),
+            [2, 5, 8]
+        );
+        assert_eq!(
+            CrossAttnBlock::new(8, 2, &device)
+                .forward(x.clone(), kv)
+                .dims(),
+            [2, 5, 8]
+        );
+        assert_eq!(
+            FfnBlock::new(8, 32, &device).forward(x.clone()).dims(),
+            [2, 5, 8]
+        );
+        assert_eq!(
+            Mlp::new(8, 16, 3, Act::Relu, &device).forward(x).dims(),
+            [2, 5, 3]
+        );
     }
 }

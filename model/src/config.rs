@@ -370,10 +370,7 @@ impl ModelConfig {
 
     /// Replaces the vocabulary by the words of `texts` (lower-cased, sorted, unique).
     pub fn with_vocab_from<'a>(mut self, texts: impl IntoIterator<Item = &'a str>) -> Self {
-        let mut words: Vec<String> = texts
-            .into_iter()
-            .flat_map(crate::text::words)
-            .collect();
+        let mut words: Vec<String> = texts.into_iter().flat_map(crate::text::words).collect();
         words.sort();
         words.dedup();
         self.text.vocab = words;
@@ -425,8 +422,12 @@ impl ModelConfig {
     /// Checks the config for consistency.
     pub fn validate(&self) -> Result<()> {
         let err = |m: String| Err(ModelError::Config(m));
-        if self.encoder.channels.is_empty() || self.encoder.channels.len() != self.encoder.strides.len() {
-            return err("encoder.channels and encoder.strides must be non-empty and of equal length".into());
+        if self.encoder.channels.is_empty()
+            || self.encoder.channels.len() != self.encoder.strides.len()
+        {
+            return err(
+                "encoder.channels and encoder.strides must be non-empty and of equal length".into(),
+            );
         }
         if self.encoder.strides.contains(&0) {
             return err("encoder.strides must be ≥ 1".into());
@@ -448,7 +449,8 @@ impl ModelConfig {
         if self.decoder.width % self.decoder.heads != 0 {
             return err("decoder.width must be divisible by decoder.heads".into());
         }
-        if self.ssm.conv == 0 || self.ssm.state == 0 || self.ssm.inner == 0 || self.ssm.dt_rank == 0 {
+        if self.ssm.conv == 0 || self.ssm.state == 0 || self.ssm.inner == 0 || self.ssm.dt_rank == 0
+        {
             return err("ssm: inner, state, conv and dt_rank must be ≥ 1".into());
         }
         if self.window.past == 0 {
@@ -476,7 +478,14 @@ mod tests {
 
     #[test]
     fn variant_names_round_trip() {
-        for name in ["e_slotssm", "e_slotssm_oracle", "slotvla_h1", "slotvla_h8", "dense", "dense_h4"] {
+        for name in [
+            "e_slotssm",
+            "e_slotssm_oracle",
+            "slotvla_h1",
+            "slotvla_h8",
+            "dense",
+            "dense_h4",
+        ] {
             assert_eq!(Variant::from_name(name).unwrap().name(), name);
         }
         assert!(Variant::from_name("slotvla").is_err());
@@ -497,7 +506,9 @@ mod tests {
         full.validate().unwrap();
         assert_eq!(full.grid(), [14, 14]);
         assert_eq!(full.window.offsets().len(), 32);
-        let full_ssm = ModelConfig::full(Variant::ESlotSsm { oracle_subgoal: true });
+        let full_ssm = ModelConfig::full(Variant::ESlotSsm {
+            oracle_subgoal: true,
+        });
         assert_eq!(full_ssm.constant_state_floats(), 16 * (512 + 3 * 1024 * 19));
     }
 
@@ -505,7 +516,10 @@ mod tests {
     fn config_round_trips_through_json_and_rejects_unknown_fields() {
         let cfg = ModelConfig::tiny(Variant::SlotVla { history: 8 })
             .with_vocab_from(["Put the bowl on the plate", "open the drawer"]);
-        assert_eq!(cfg.text.vocab, vec!["bowl", "drawer", "on", "open", "plate", "put", "the"]);
+        assert_eq!(
+            cfg.text.vocab,
+            vec!["bowl", "drawer", "on", "open", "plate", "put", "the"]
+        );
         let json = serde_json::to_string(&cfg).unwrap();
         let back: ModelConfig = serde_json::from_str(&json).unwrap();
         assert_eq!(back, cfg);

@@ -196,7 +196,9 @@ impl ActionDecoder {
         if let Some(head) = &self.l1 {
             let mut y = head.input.forward(out.reshape([n, h, a * w]));
             for blk in &head.blocks {
-                let r = blk.fc2.forward(gelu(blk.fc1.forward(blk.norm.forward(y.clone()))));
+                let r = blk
+                    .fc2
+                    .forward(gelu(blk.fc1.forward(blk.norm.forward(y.clone()))));
                 y = y + r;
             }
             DecoderOutput {
@@ -248,15 +250,21 @@ mod tests {
             let a = -1.0 + i as f32 / 100.0;
             assert!((class_to_action(action_to_class(a)) - a).abs() <= 1.0 / 255.0 + 1e-6);
         }
-        let device = test_device();
+        let (_guard, device) = test_device();
         let t = Tensor::<1>::from_floats([-1.0, -0.3, 0.0, 0.7, 1.0], &device);
         let classes = actions_to_classes(t.clone());
         let want: Vec<i64> = [-1.0f32, -0.3, 0.0, 0.7, 1.0]
             .iter()
             .map(|&a| action_to_class(a) as i64)
             .collect();
-        assert_eq!(classes.clone().into_data().try_to_vec_as::<i64>().unwrap(), want);
-        let back = classes_to_actions(classes).into_data().try_to_vec::<f32>().unwrap();
+        assert_eq!(
+            classes.clone().into_data().try_to_vec_as::<i64>().unwrap(),
+            want
+        );
+        let back = classes_to_actions(classes)
+            .into_data()
+            .try_to_vec::<f32>()
+            .unwrap();
         for (b, &c) in back.iter().zip(&want) {
             assert!((b - class_to_action(c as usize)).abs() < 1e-6);
         }
@@ -264,7 +272,7 @@ mod tests {
 
     #[test]
     fn decoder_shapes_for_both_heads() {
-        let device = test_device();
+        let (_guard, device) = test_device();
         let vis = Tensor::<3>::random([4, 5, 16], Distribution::Default, &device);
         let lang = Tensor::<3>::random([4, 6, 16], Distribution::Default, &device);
         let pad = Tensor::<2>::zeros([4, 6], &device).equal_elem(1.0);
@@ -283,7 +291,7 @@ mod tests {
 
     #[test]
     fn masked_visual_tokens_do_not_change_the_actions() {
-        let device = test_device();
+        let (_guard, device) = test_device();
         let dec = ActionDecoder::new(&cfg(ActionHead::L1), &device);
         let vis = Tensor::<3>::random([1, 5, 16], Distribution::Default, &device);
         let lang = Tensor::<3>::random([1, 6, 16], Distribution::Default, &device);
@@ -297,8 +305,12 @@ mod tests {
             ],
             1,
         );
-        let a = dec.forward(vis.clone(), Some(vpad.clone()), lang.clone(), lpad.clone()).actions;
-        let b = dec.forward(other, Some(vpad), lang.clone(), lpad.clone()).actions;
+        let a = dec
+            .forward(vis.clone(), Some(vpad.clone()), lang.clone(), lpad.clone())
+            .actions;
+        let b = dec
+            .forward(other, Some(vpad), lang.clone(), lpad.clone())
+            .actions;
         let c = dec.forward(vis.narrow(1, 2, 3), None, lang, lpad).actions;
         let d1: f32 = (a.clone() - b).abs().max().into_scalar();
         let d2: f32 = (a - c).abs().max().into_scalar();

@@ -65,7 +65,13 @@ impl VisualEncoder {
     /// The position grid `[M, 4]` with rows [x, y, 1−x, 1−y], x and y in [0, 1].
     fn grid_tensor(&self, device: &Device) -> Tensor<2> {
         let [gh, gw] = self.grid;
-        let lin = |i: usize, n: usize| if n > 1 { i as f32 / (n - 1) as f32 } else { 0.5 };
+        let lin = |i: usize, n: usize| {
+            if n > 1 {
+                i as f32 / (n - 1) as f32
+            } else {
+                0.5
+            }
+        };
         let mut data = Vec::with_capacity(gh * gw * 4);
         for r in 0..gh {
             for c in 0..gw {
@@ -122,7 +128,7 @@ mod tests {
 
     #[test]
     fn tiny_encoder_output_shape() {
-        let device = test_device();
+        let (_guard, device) = test_device();
         let cfg = ModelConfig::tiny(Variant::Dense { history: 1 });
         let enc = VisualEncoder::new(&cfg, &device);
         let x = Tensor::<5>::random([2, 3, 3, 64, 64], Distribution::Default, &device);
@@ -131,7 +137,7 @@ mod tests {
 
     #[test]
     fn small_images_give_a_smaller_grid() {
-        let device = test_device();
+        let (_guard, device) = test_device();
         let mut cfg = ModelConfig::tiny(Variant::Dense { history: 1 });
         cfg.image_size = [32, 32];
         let enc = VisualEncoder::new(&cfg, &device);

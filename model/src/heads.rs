@@ -106,7 +106,11 @@ impl SlotDecoder {
     /// Builds a decoder for `m` positions, slots of width `d`, targets of width `d_tgt`.
     pub fn new(m: usize, d: usize, hidden: usize, d_tgt: usize, device: &Device) -> Self {
         SlotDecoder {
-            pos: Param::from_tensor(Tensor::random([m, d], Distribution::Normal(0.0, 0.02), device)),
+            pos: Param::from_tensor(Tensor::random(
+                [m, d],
+                Distribution::Normal(0.0, 0.02),
+                device,
+            )),
             fc1: LinearConfig::new(d, hidden).init(device),
             fc2: LinearConfig::new(hidden, hidden).init(device),
             fc3: LinearConfig::new(hidden, d_tgt + 1).init(device),
@@ -139,7 +143,7 @@ mod tests {
 
     #[test]
     fn head_shapes() {
-        let device = test_device();
+        let (_guard, device) = test_device();
         let s = Tensor::<4>::random([2, 3, 4, 8], Distribution::Default, &device);
         let w = WindowHead::new(8, 5, &device).forward(s.clone(), s.clone());
         assert_eq!(w.dims(), [2, 3, 4, 5, 8]);

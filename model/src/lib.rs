@@ -19,15 +19,38 @@ pub mod policy;
 pub mod relation;
 pub mod slot_attention;
 pub mod slot_ssm;
+pub mod streaming;
 pub mod text;
 
 pub use config::{ModelConfig, Variant};
 pub use error::{ModelError, Result};
+pub use policy::{Losses, PolicyModel, WindowBatch, WindowOutput};
+pub use streaming::{ActionStats, Observation, StreamingPolicy};
+pub use text::Tokenizer;
 
-/// The CPU device used by the unit tests (flex, pure Rust), seeded.
+/// The CPU device of the unit tests (flex, pure Rust), seeded with 0.
+///
+/// Burn's RNG may be global, and the test harness runs tests on several threads: the returned
+/// guard holds a process-wide lock until the test ends, so that a seed really fixes every
+/// random draw of that test (same seed → same result).
 #[cfg(test)]
-pub(crate) fn test_device() -> burn::prelude::Device {
-    let device = burn::prelude::Device::flex();
+pub(crate) fn test_device() -> (std::sync::MutexGuard<'static, ()>, burn::prelude::Device) {
+    seeded(burn::prelude::Device::flex())
+}
+
+/// [`test_device`] with autodiff.
+#[cfg(test)]
+pub(crate) fn test_autodiff_device() -> (std::sync::MutexGuard<'static, ()>, burn::prelude::Device)
+{
+    seeded(burn::prelude::Device::flex().autodiff())
+}
+
+#[cfg(test)]
+fn seeded(
+    device: burn::prelude::Device,
+) -> (std::sync::MutexGuard<'static, ()>, burn::prelude::Device) {
+    static LOCK: std::sync::Mutex<()> = std::sync::Mutex::new(());
+    let guard = LOCK.lock().unwrap_or_else(|e| e.into_inner());
     device.seed(0);
-    device
+    (guard, device)
 }

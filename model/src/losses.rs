@@ -32,7 +32,10 @@ pub fn action_ce(logits: Tensor<5>, target: Tensor<4>, mask: Tensor<4>) -> Tenso
     assert_shape!(logits, [b, t, h, a, NUM_BINS]);
     assert_shape!(mask, [b, t, h, a]);
     let classes = actions_to_classes(target).unsqueeze_dim::<5>(4);
-    let nll = log_softmax(logits, 4).gather(4, classes).squeeze_dim::<4>(4).neg();
+    let nll = log_softmax(logits, 4)
+        .gather(4, classes)
+        .squeeze_dim::<4>(4)
+        .neg();
     masked_mean(nll, mask)
 }
 
@@ -118,7 +121,10 @@ fn shift_time(x: Tensor<4>, mask: Tensor<2>, o: i64, device: &Device) -> (Tensor
     let [b, t, k, d] = x.dims();
     let s = o.unsigned_abs() as usize;
     if s >= t {
-        return (Tensor::zeros([b, t, k, d], device), Tensor::zeros([b, t], device));
+        return (
+            Tensor::zeros([b, t, k, d], device),
+            Tensor::zeros([b, t], device),
+        );
     }
     if o == 0 {
         return (x, mask);
@@ -146,7 +152,10 @@ pub fn slot_recon(recon: Tensor<4>, target: Tensor<4>, frame_mask: Tensor<2>) ->
     let [b, t, m, d] = recon.dims();
     assert_shape!(target, [b, t, m, d]);
     assert_shape!(frame_mask, [b, t]);
-    let mask = frame_mask.reshape([b, t, 1, 1]).repeat_dim(2, m).repeat_dim(3, d);
+    let mask = frame_mask
+        .reshape([b, t, 1, 1])
+        .repeat_dim(2, m)
+        .repeat_dim(3, d);
     masked_mean((recon - target.detach()).square(), mask)
 }
 
@@ -178,7 +187,7 @@ mod tests {
 
     #[test]
     fn action_l1_is_the_masked_mean_abs_error() {
-        let device = test_device();
+        let (_guard, device) = test_device();
         let pred = Tensor::<4>::from_floats([[[[1.0, 2.0], [3.0, 4.0]]]], &device);
         let target = Tensor::<4>::from_floats([[[[0.0, 0.0], [0.0, 10.0]]]], &device);
         let all = Tensor::<4>::ones([1, 1, 2, 2], &device);
@@ -189,13 +198,16 @@ mod tests {
 
     #[test]
     fn action_ce_is_low_for_confident_right_bins() {
-        let device = test_device();
+        let (_guard, device) = test_device();
         let target = Tensor::<4>::from_floats([[[[0.0, 1.0]]]], &device);
         let mask = Tensor::<4>::ones([1, 1, 1, 2], &device);
         let uniform = Tensor::<5>::zeros([1, 1, 1, 2, NUM_BINS], &device);
         let ce = scalar(action_ce(uniform, target.clone(), mask.clone()));
         assert!((ce - (NUM_BINS as f64).ln()).abs() < 1e-4);
-        let classes = actions_to_classes(target.clone()).into_data().try_to_vec_as::<i64>().unwrap();
+        let classes = actions_to_classes(target.clone())
+            .into_data()
+            .try_to_vec_as::<i64>()
+            .unwrap();
         let mut data = vec![0.0f32; 2 * NUM_BINS];
         data[classes[0] as usize] = 50.0;
         data[NUM_BINS + classes[1] as usize] = 50.0;
@@ -205,7 +217,7 @@ mod tests {
 
     #[test]
     fn contrastive_never_below_the_loose_bound_on_random_slots() {
-        let device = test_device();
+        let (_guard, device) = test_device();
         device.seed(5);
         for k in [2, 4, 8] {
             let slots = Tensor::<4>::random([3, 5, k, 16], Distribution::Normal(0.0, 1.0), &device);
@@ -233,22 +245,30 @@ mod tests {
 
     #[test]
     fn contrastive_reaches_the_floor_for_simplex_slots() {
-        let device = test_device();
+        let (_guard, device) = test_device();
         let mask = Tensor::<2>::ones([1, 4], &device);
         for (k, want) in [(8, 1.173), (16, 1.819)] {
-            let l = scalar(temporal_contrastive(simplex_slots(k, 4, &device), mask.clone(), 1.0));
+            let l = scalar(temporal_contrastive(
+                simplex_slots(k, 4, &device),
+                mask.clone(),
+                1.0,
+            ));
             assert!((l - contrastive_floor(k, 1.0)).abs() < 1e-5, "K={k}: {l}");
             assert!((contrastive_floor(k, 1.0) - want).abs() < 1e-3);
         }
         // At K = 2 the simplex has cosine −1, so the loose bound is reached too.
-        let l = scalar(temporal_contrastive(simplex_slots(2, 4, &device), mask, 1.0));
+        let l = scalar(temporal_contrastive(
+            simplex_slots(2, 4, &device),
+            mask,
+            1.0,
+        ));
         assert!((l - contrastive_loose_bound(2, 1.0)).abs() < 1e-5, "{l}");
         assert!((contrastive_floor(2, 1.0) - contrastive_loose_bound(2, 1.0)).abs() < 1e-12);
     }
 
     #[test]
     fn contrastive_ignores_invalid_pairs() {
-        let device = test_device();
+        let (_guard, device) = test_device();
         let good = simplex_slots(4, 3, &device);
         let noise = Tensor::<4>::random([1, 2, 4, 7], Distribution::Normal(0.0, 1.0), &device);
         let slots = Tensor::cat(vec![good, noise], 1);
@@ -259,7 +279,7 @@ mod tests {
 
     #[test]
     fn windowed_recon_is_zero_for_exact_predictions_and_masks_the_edges() {
-        let device = test_device();
+        let (_guard, device) = test_device();
         let (b, t, k, d) = (2, 5, 3, 4);
         let slots = Tensor::<4>::random([b, t, k, d], Distribution::Normal(0.0, 1.0), &device);
         let offsets = [-2i64, -1, 0, 1];
@@ -298,7 +318,7 @@ mod tests {
 
     #[test]
     fn slot_recon_and_patches() {
-        let device = test_device();
+        let (_guard, device) = test_device();
         let img = Tensor::<5>::random([1, 2, 3, 4, 6], Distribution::Default, &device);
         let patches = image_patches(img.clone(), [2, 3]);
         assert_eq!(patches.dims(), [1, 2, 6, 12]);

@@ -118,7 +118,9 @@ impl Mamba {
                 Distribution::Uniform(-conv_bound, conv_bound),
                 device,
             )),
-            x_proj: LinearConfig::new(e, r + 2 * s).with_bias(false).init(device),
+            x_proj: LinearConfig::new(e, r + 2 * s)
+                .with_bias(false)
+                .init(device),
             dt_proj,
             a_log: Param::from_tensor(Tensor::from_data(TensorData::new(a_log, [e, s]), device)),
             d_skip: Param::from_tensor(Tensor::ones([e], device)),
@@ -187,7 +189,9 @@ impl Mamba {
         let a_bar = (delta4 * self.a().reshape([1, 1, e, s])).exp(); // [N, T, E, S]
         let bx = (delta * xc.clone()).unsqueeze_dim::<4>(3) * b.unsqueeze_dim::<4>(2);
         let h = parallel_scan(a_bar, bx, Some(state.h));
-        let y = (h.clone() * c.unsqueeze_dim::<4>(2)).sum_dim(3).squeeze_dim::<3>(3)
+        let y = (h.clone() * c.unsqueeze_dim::<4>(2))
+            .sum_dim(3)
+            .squeeze_dim::<3>(3)
             + xc * self.d_skip.val().reshape([1, 1, e]);
         let out = self.out_proj.forward(y * silu(z));
         let h_last = h.narrow(1, t - 1, 1).squeeze_dim::<3>(1);
@@ -224,7 +228,9 @@ impl Mamba {
         let a_bar = (delta.clone().unsqueeze_dim::<3>(2) * self.a().unsqueeze_dim::<3>(0)).exp();
         let bx = (delta * xc.clone()).unsqueeze_dim::<3>(2) * b.unsqueeze_dim::<3>(1);
         let h = a_bar * state.h + bx; // [N, E, S]
-        let y = (h.clone() * c.unsqueeze_dim::<3>(1)).sum_dim(2).squeeze_dim::<2>(2)
+        let y = (h.clone() * c.unsqueeze_dim::<3>(1))
+            .sum_dim(2)
+            .squeeze_dim::<2>(2)
             + xc * self.d_skip.val().unsqueeze_dim::<2>(0);
         let out = self.out_proj.forward(y * silu(z));
         (out, MambaState { h, conv })
@@ -255,7 +261,8 @@ pub fn parallel_scan(a: Tensor<4>, b: Tensor<4>, h_init: Option<Tensor<3>>) -> T
     if let Some(h0) = h_init {
         assert_shape!(h0, [n, e, s]);
         // Fold h_init into the first step: b₀ ← a₀ ⊙ h_init + b₀.
-        let first = a.clone().narrow(1, 0, 1) * h0.unsqueeze_dim::<4>(1) + b.clone().narrow(1, 0, 1);
+        let first =
+            a.clone().narrow(1, 0, 1) * h0.unsqueeze_dim::<4>(1) + b.clone().narrow(1, 0, 1);
         b = if t > 1 {
             Tensor::cat(vec![first, b.narrow(1, 1, t - 1)], 1)
         } else {
@@ -265,11 +272,17 @@ pub fn parallel_scan(a: Tensor<4>, b: Tensor<4>, h_init: Option<Tensor<3>>) -> T
     let mut d = 1;
     while d < t {
         let a_shift = Tensor::cat(
-            vec![Tensor::ones([n, d, e, s], &device), a.clone().narrow(1, 0, t - d)],
+            vec![
+                Tensor::ones([n, d, e, s], &device),
+                a.clone().narrow(1, 0, t - d),
+            ],
             1,
         );
         let b_shift = Tensor::cat(
-            vec![Tensor::zeros([n, d, e, s], &device), b.clone().narrow(1, 0, t - d)],
+            vec![
+                Tensor::zeros([n, d, e, s], &device),
+                b.clone().narrow(1, 0, t - d),
+            ],
             1,
         );
         b = b + a.clone() * b_shift;
@@ -303,7 +316,7 @@ mod tests {
 
     #[test]
     fn scan_matches_sequential_recurrence() {
-        let device = test_device();
+        let (_guard, device) = test_device();
         device.seed(7);
         for t in [1, 2, 5, 8, 13] {
             let a = Tensor::<4>::random([3, t, 2, 2], Distribution::Uniform(0.0, 1.0), &device);
@@ -322,10 +335,16 @@ mod tests {
 
     #[test]
     fn softplus_is_stable() {
-        let device = test_device();
+        let (_guard, device) = test_device();
         let x = Tensor::<1>::from_floats([-100.0, -1.0, 0.0, 2.0, 100.0], &device);
         let y = stable_softplus(x).into_data().try_to_vec::<f32>().unwrap();
-        let want = [0.0f32, 0.313_261_7, std::f32::consts::LN_2, 2.126_928, 100.0];
+        let want = [
+            0.0f32,
+            0.313_261_7,
+            std::f32::consts::LN_2,
+            2.126_928,
+            100.0,
+        ];
         for (a, b) in y.iter().zip(want) {
             assert!((a - b).abs() < 1e-5, "{a} vs {b}");
         }
@@ -333,7 +352,7 @@ mod tests {
 
     #[test]
     fn init_follows_mamba() {
-        let device = test_device();
+        let (_guard, device) = test_device();
         let m = Mamba::new(8, &cfg(), &device);
         let a = m.a().into_data().try_to_vec::<f32>().unwrap();
         assert!((a[0] + 1.0).abs() < 1e-6 && (a[3] + 4.0).abs() < 1e-5);
@@ -346,7 +365,7 @@ mod tests {
     }
 
     fn parallel_equals_steps(random_init: bool) {
-        let device = test_device();
+        let (_guard, device) = test_device();
         device.seed(11);
         let m = Mamba::new(8, &cfg(), &device);
         let (n, t) = (3, 9);

@@ -125,7 +125,12 @@ impl PolicyModel {
         let d_f = config.encoder.feature_dim;
         let slots = variant.has_slots();
         let ssm = variant.has_ssm();
-        let oracle = matches!(variant, Variant::ESlotSsm { oracle_subgoal: true });
+        let oracle = matches!(
+            variant,
+            Variant::ESlotSsm {
+                oracle_subgoal: true
+            }
+        );
         let h = variant.history();
         Ok(PolicyModel {
             encoder: VisualEncoder::new(config, device),
@@ -148,7 +153,11 @@ impl PolicyModel {
                 device,
             )),
             frame_offset: (h > 1).then(|| {
-                Param::from_tensor(Tensor::random([h, w], Distribution::Normal(0.0, 0.02), device))
+                Param::from_tensor(Tensor::random(
+                    [h, w],
+                    Distribution::Normal(0.0, 0.02),
+                    device,
+                ))
             }),
             text: TextEncoder::new(&config.text, w, device),
             decoder: ActionDecoder::new(&config.decoder, device),
@@ -202,7 +211,11 @@ impl PolicyModel {
         let k = self.config.slots.num_slots;
         let w = self.config.decoder.width;
         match (subgoal, &self.null_subgoal) {
-            (_, Some(null)) => Ok(null.val().reshape([1, 1, w]).repeat_dim(0, n).repeat_dim(1, k)),
+            (_, Some(null)) => Ok(null
+                .val()
+                .reshape([1, 1, w])
+                .repeat_dim(0, n)
+                .repeat_dim(1, k)),
             (Some(ids), None) => {
                 let [n2, g, l] = ids.dims();
                 if n2 != n || (g != 1 && g != k) {
@@ -235,7 +248,10 @@ impl PolicyModel {
                 Tensor::cat(vec![r, z], 1)
             }
             _ => {
-                let proj = self.patch_proj.as_ref().expect("dense model has a patch projection");
+                let proj = self
+                    .patch_proj
+                    .as_ref()
+                    .expect("dense model has a patch projection");
                 proj.forward(feats) + self.type_embedding(TYPE_PATCH)
             }
         }
@@ -347,7 +363,10 @@ impl PolicyModel {
                 out.predicted = Some(pred);
                 z
             } else {
-                let proj = self.slot_proj.as_ref().expect("SlotVLA has a slot projection");
+                let proj = self
+                    .slot_proj
+                    .as_ref()
+                    .expect("SlotVLA has a slot projection");
                 proj.forward(slots.clone().reshape([n, k, d]))
             };
             out.slots = Some(slots);
@@ -364,7 +383,9 @@ impl PolicyModel {
         let dec = self.decode(visual, pad, instr);
         let (ha, a) = (cfg.decoder.horizon, cfg.decoder.action_dim);
         out.actions = dec.actions.reshape([b, t, ha, a]);
-        out.logits = dec.logits.map(|l| l.reshape([b, t, ha, a, crate::decoder::NUM_BINS]));
+        out.logits = dec
+            .logits
+            .map(|l| l.reshape([b, t, ha, a, crate::decoder::NUM_BINS]));
         Ok(out)
     }
 
@@ -398,7 +419,10 @@ impl PolicyModel {
                 first.clone().repeat_dim(1, t)
             } else {
                 Tensor::cat(
-                    vec![first.clone().repeat_dim(1, lag), x.clone().narrow(1, 0, t - lag)],
+                    vec![
+                        first.clone().repeat_dim(1, lag),
+                        x.clone().narrow(1, 0, t - lag),
+                    ],
                     1,
                 )
             };
@@ -448,9 +472,10 @@ impl PolicyModel {
             _ => losses::action_l1(out.actions.clone(), batch.actions.clone(), action_mask),
         };
         let mut total = action.clone().mul_scalar(cfg.loss.action);
-        let contrastive = out.slots.as_ref().map(|s| {
-            losses::temporal_contrastive(s.clone(), frame_mask.clone(), cfg.loss.tau)
-        });
+        let contrastive = out
+            .slots
+            .as_ref()
+            .map(|s| losses::temporal_contrastive(s.clone(), frame_mask.clone(), cfg.loss.tau));
         if let Some(l) = &contrastive {
             total = total + l.clone().mul_scalar(cfg.loss.contrastive);
         }
@@ -493,5 +518,358 @@ impl PolicyModel {
                 slot_recon,
             },
         ))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::streaming::StreamingPolicy;
+    use crate::text::Tokenizer;
+    use crate::{test_autodiff_device, test_device};
+    use burn::module::ModuleVisitor;
+    use burn::tensor::Distribution;
+    use burn::tensor::Gradients;
+
+    const INSTRUCTIONS: [&str; 2] = ["put the bowl on the plate", "open the top drawer"];
+
+    fn tiny(variant: &str) -> ModelConfig {
+        ModelConfig::tiny(Variant::from_name(variant).unwrap())
+            .with_vocab_from(INSTRUCTIONS.iter().copied().chain(["bowl", "drawer"]))
+    }
+
+    /// A smaller-than-tiny config (32² images, narrow widths) for the slow tests.
+    fn micro(variant: &str) -> ModelConfig {
+        let mut cfg = tiny(variant);
+        cfg.image_size = [32, 32];
+        cfg.encoder.channels = vec![16, 32, 32];
+        cfg.encoder.feature_dim = 32;
+        cfg.slots.num_slots = 4;
+        cfg.slots.dim = 32;
+        cfg.ssm.inner = 64;
+        cfg.ssm.state = 4;
+        cfg.ssm.dt_rank = 2;
+        cfg.relation.tokens = 4;
+        cfg.relation.layers = 1;
+        cfg.decoder.width = 64;
+        cfg.decoder.layers = 1;
+        cfg.decoder.horizon = 2;
+        cfg.window = crate::config::WindowConfig { past: 2, future: 1 };
+        cfg.loss.sa_hidden = 32;
+        cfg.text.max_len = 8;
+        cfg
+    }
+
+    fn batch(cfg: &ModelConfig, b: usize, t: usize, device: &Device) -> WindowBatch {
+        let [h, w] = cfg.image_size;
+        let (ha, a) = (cfg.decoder.horizon, cfg.decoder.action_dim);
+        let tok = Tokenizer::new(&cfg.text);
+        let texts: Vec<&str> = (0..b).map(|i| INSTRUCTIONS[i % 2]).collect();
+        let sub_texts: Vec<&str> = (0..b * t).map(|i| ["bowl", "drawer"][i % 2]).collect();
+        let subgoal = tok
+            .encode_batch(&sub_texts, device)
+            .reshape([b, t, 1, cfg.text.max_len]);
+        let mut mask = vec![1.0f32; b * t];
+        mask[b * t - 1] = 0.0; // last frame of the last sample is padding
+        WindowBatch {
+            images: Tensor::random([b, t, 3, h, w], Distribution::Uniform(0.0, 1.0), device),
+            actions: Tensor::random([b, t, ha, a], Distribution::Uniform(-1.0, 1.0), device),
+            frame_mask: Tensor::from_data(TensorData::new(mask, [b, t]), device),
+            action_mask: None,
+            instruction: tok.encode_batch(&texts, device),
+            subgoal: Some(subgoal),
+        }
+    }
+
+    fn scalar(x: Tensor<1>) -> f32 {
+        x.into_scalar::<f32>()
+    }
+
+    #[test]
+    fn every_variant_has_the_documented_shapes_and_losses() {
+        let (_guard, device) = test_device();
+        let (b, t) = (2, 3);
+        for name in [
+            "e_slotssm",
+            "e_slotssm_oracle",
+            "slotvla_h1",
+            "slotvla_h8",
+            "dense",
+        ] {
+            let cfg = tiny(name);
+            let model = PolicyModel::new(&cfg, &device).unwrap();
+            let (out, losses) = model.forward(&batch(&cfg, b, t, &device)).unwrap();
+            assert_eq!(out.actions.dims(), [b, t, 4, 7], "{name}");
+            let slots = cfg.variant.has_slots();
+            let ssm = cfg.variant.has_ssm();
+            assert_eq!(
+                out.slots.as_ref().map(|s| s.dims()),
+                slots.then_some([b, t, 8, 64])
+            );
+            assert_eq!(
+                out.masks.as_ref().map(|s| s.dims()),
+                slots.then_some([b, t, 8, 64])
+            );
+            assert_eq!(
+                out.predicted.as_ref().map(|s| s.dims()),
+                ssm.then_some([b, t, 8, 64])
+            );
+            assert_eq!(
+                out.window.as_ref().map(|s| s.dims()),
+                ssm.then_some([b, t, 8, 8, 64])
+            );
+            assert_eq!(losses.contrastive.is_some(), slots, "{name}");
+            assert_eq!(losses.slot_recon.is_some(), slots, "{name}");
+            assert_eq!(losses.window.is_some(), ssm, "{name}");
+            let mut want = scalar(losses.action.clone());
+            for (l, w) in [
+                (&losses.contrastive, cfg.loss.contrastive),
+                (&losses.window, cfg.loss.window),
+                (&losses.slot_recon, cfg.loss.slot_recon),
+            ] {
+                if let Some(l) = l {
+                    want += w as f32 * scalar(l.clone());
+                }
+            }
+            let total = scalar(losses.total);
+            assert!(total.is_finite() && (total - want).abs() < 1e-4, "{name}");
+        }
+        // The discrete head.
+        let mut cfg = tiny("slotvla_h1");
+        cfg.decoder.head = ActionHead::Bins;
+        let model = PolicyModel::new(&cfg, &device).unwrap();
+        let (out, losses) = model.forward(&batch(&cfg, b, t, &device)).unwrap();
+        assert_eq!(out.logits.unwrap().dims(), [b, t, 4, 7, 256]);
+        // Near-uniform logits at init: CE ≈ ln 256.
+        assert!((scalar(losses.action) - 256f32.ln()).abs() < 1.0);
+    }
+
+    #[test]
+    fn bad_inputs_are_errors() {
+        let (_guard, device) = test_device();
+        let cfg = tiny("slotvla_h1");
+        let model = PolicyModel::new(&cfg, &device).unwrap();
+        let mut bad = batch(&cfg, 1, 2, &device);
+        bad.actions = Tensor::zeros([1, 2, 3, 7], &device);
+        assert!(model.forward(&bad).is_err());
+        let ids = Tokenizer::new(&cfg.text).encode_batch(&["x"], &device);
+        let small = Tensor::<5>::zeros([1, 1, 3, 32, 32], &device);
+        assert!(model.predict(small, ids, None).is_err());
+        let mut cfg = tiny("e_slotssm_oracle");
+        cfg.encoder.strides = vec![2];
+        assert!(PolicyModel::new(&cfg, &device).is_err());
+    }
+
+    /// Collects the parameters whose gradient is missing or exactly zero.
+    struct GradCheck<'a> {
+        grads: &'a Gradients,
+        path: Vec<String>,
+        visited: usize,
+        bad: Vec<String>,
+    }
+
+    impl ModuleVisitor for GradCheck<'_> {
+        fn enter_module(&mut self, name: &str, _container_type: &str) {
+            self.path.push(name.to_string());
+        }
+
+        fn exit_module(&mut self, _name: &str, _container_type: &str) {
+            self.path.pop();
+        }
+
+        fn visit_float<const D: usize>(&mut self, param: &Param<Tensor<D>>) {
+            self.visited += 1;
+            let tensor = param.val();
+            let ok = tensor
+                .grad(self.grads)
+                .map(|g| g.abs().sum().into_scalar::<f32>() > 0.0)
+                .unwrap_or(false);
+            if !ok {
+                self.bad
+                    .push(format!("{} {:?}", self.path.join("."), tensor.dims()));
+            }
+        }
+    }
+
+    fn check_all_gradients(name: &str) {
+        let (_guard, device) = test_autodiff_device();
+        device.seed(1);
+        let cfg = micro(name);
+        let model = PolicyModel::new(&cfg, &device).unwrap();
+        let (_, losses) = model.forward(&batch(&cfg, 2, 4, &device)).unwrap();
+        let grads = losses.total.backward();
+        let mut check = GradCheck {
+            grads: &grads,
+            path: Vec::new(),
+            visited: 0,
+            bad: Vec::new(),
+        };
+        model.visit(&mut check);
+        assert!(check.visited > 50, "{name}: visited only {}", check.visited);
+        // Every word of the batch is used, but the vocabulary also holds special ids and
+        // words absent from this batch: embedding rows are one parameter, so it still counts.
+        assert!(
+            check.bad.is_empty(),
+            "{name}: no gradient for {:?}",
+            check.bad
+        );
+    }
+
+    #[test]
+    fn every_parameter_gets_a_gradient_e_slotssm() {
+        check_all_gradients("e_slotssm");
+    }
+
+    #[test]
+    fn every_parameter_gets_a_gradient_e_slotssm_oracle() {
+        check_all_gradients("e_slotssm_oracle");
+    }
+
+    #[test]
+    fn every_parameter_gets_a_gradient_slotvla_h8() {
+        check_all_gradients("slotvla_h8");
+    }
+
+    #[test]
+    fn every_parameter_gets_a_gradient_dense() {
+        check_all_gradients("dense");
+    }
+
+    /// Streaming the frames one by one gives the actions of the full window forward.
+    fn streaming_equals_window(cfg: ModelConfig, frames: usize) {
+        let (_guard, device) = test_device();
+        device.seed(9);
+        let model = PolicyModel::new(&cfg, &device).unwrap();
+        let tok = Tokenizer::new(&cfg.text);
+        let [h, w] = cfg.image_size;
+        let images = Tensor::<5>::random(
+            [1, frames, 3, h, w],
+            Distribution::Uniform(0.0, 1.0),
+            &device,
+        );
+        let instr = tok.encode_batch(&[INSTRUCTIONS[0]], &device);
+        let sub_texts: Vec<&str> = (0..frames)
+            .map(|i| if i < frames / 2 { "bowl" } else { "drawer" })
+            .collect();
+        let subgoal =
+            tok.encode_batch(&sub_texts, &device)
+                .reshape([1, frames, 1, cfg.text.max_len]);
+        let full = model
+            .predict(images.clone(), instr.clone(), Some(subgoal.clone()))
+            .unwrap()
+            .actions;
+        let mut policy = StreamingPolicy::new(model, &device).unwrap();
+        let mut worst = 0.0f32;
+        for t in 0..frames {
+            let img = images.clone().narrow(1, t, 1).squeeze_dim::<4>(1);
+            let sg = subgoal.clone().narrow(1, t, 1).squeeze_dim::<3>(1);
+            let chunk = policy.act_tensor(img, instr.clone(), Some(sg)).unwrap();
+            let want = full.clone().narrow(1, t, 1).reshape(chunk.dims());
+            worst = worst.max((chunk - want).abs().max().into_scalar::<f32>());
+        }
+        assert!(worst < 1e-4, "{}: max diff {worst}", cfg.variant.name());
+    }
+
+    #[test]
+    fn streaming_over_50_frames_equals_full_forward_e_slotssm() {
+        streaming_equals_window(tiny("e_slotssm"), 50);
+    }
+
+    #[test]
+    fn streaming_over_50_frames_equals_full_forward_e_slotssm_oracle_cross_attention() {
+        let mut cfg = tiny("e_slotssm_oracle");
+        cfg.ssm.cross_attention = true;
+        streaming_equals_window(cfg, 50);
+    }
+
+    #[test]
+    fn streaming_over_50_frames_equals_full_forward_slotvla_h8() {
+        streaming_equals_window(tiny("slotvla_h8"), 50);
+    }
+
+    #[test]
+    fn streaming_equals_full_forward_dense_h3() {
+        streaming_equals_window(micro("dense_h3"), 10);
+    }
+
+    #[test]
+    fn records_round_trip_and_bad_files_are_errors() {
+        let (_guard, device) = test_device();
+        let cfg = micro("e_slotssm");
+        device.seed(21);
+        let a = PolicyModel::new(&cfg, &device).unwrap();
+        device.seed(22);
+        let b = PolicyModel::new(&cfg, &device).unwrap();
+        let dir = std::env::temp_dir().join(format!("model-record-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let path = dir.join("weights.bpk");
+        a.save(&path).unwrap();
+        let loaded = PolicyModel::load(&cfg, &path, &device).unwrap();
+        let x = batch(&cfg, 1, 2, &device);
+        let run = |m: &PolicyModel| {
+            m.predict(x.images.clone(), x.instruction.clone(), None)
+                .unwrap()
+                .actions
+        };
+        let same: f32 = (run(&a) - run(&loaded)).abs().max().into_scalar();
+        let other: f32 = (run(&a) - run(&b)).abs().max().into_scalar();
+        assert_eq!(same, 0.0);
+        assert!(other > 0.0);
+        std::fs::write(dir.join("junk.bpk"), b"not a record").unwrap();
+        assert!(PolicyModel::load(&cfg, dir.join("junk.bpk"), &device).is_err());
+        assert!(PolicyModel::load(&cfg, dir.join("missing.bpk"), &device).is_err());
+        // A record of another architecture does not load either.
+        let other_cfg = micro("dense");
+        assert!(PolicyModel::load(&other_cfg, &path, &device).is_err());
+        std::fs::remove_dir_all(&dir).ok();
+    }
+
+    #[test]
+    fn same_seed_same_model() {
+        // Burn initialises most parameters lazily (at their first use), so "same seed" means:
+        // same seed, then the same sequence of calls.
+        let (_guard, device) = test_device();
+        let cfg = micro("slotvla_h8");
+        device.seed(6);
+        let x = batch(&cfg, 1, 3, &device);
+        let run = |seed: u64| {
+            device.seed(seed);
+            let m = PolicyModel::new(&cfg, &device).unwrap();
+            scalar(m.forward(&x).unwrap().1.total)
+        };
+        let (a, b, c) = (run(5), run(5), run(7));
+        assert_eq!(a, b);
+        assert_ne!(a, c);
+    }
+
+    #[test]
+    fn tiny_model_overfits_one_batch() {
+        use burn::grad_clipping::GradientClippingConfig;
+        use burn::optim::{AdamWConfig, GradientsParams};
+        let (_guard, device) = test_autodiff_device();
+        device.seed(3);
+        let cfg = micro("e_slotssm");
+        let mut model = PolicyModel::new(&cfg, &device).unwrap();
+        let x = batch(&cfg, 2, 4, &device);
+        let mut optim = AdamWConfig::new()
+            .with_weight_decay(0.0)
+            .with_grad_clipping(Some(GradientClippingConfig::Norm(1.0)))
+            .init();
+        let mut first = None;
+        let mut last = f32::INFINITY;
+        for step in 0..400 {
+            let (_, losses) = model.forward(&x).unwrap();
+            let act = scalar(losses.action.clone());
+            let initial = *first.get_or_insert(act);
+            last = act;
+            if act < 0.1 * initial {
+                eprintln!("overfit: L_act {initial:.4} → {act:.4} in {step} steps");
+                break;
+            }
+            let grads = GradientsParams::from_grads(losses.total.backward(), &model);
+            model = optim.step(1e-3, model, grads);
+        }
+        let initial = first.unwrap();
+        assert!(last < 0.1 * initial, "L_act {initial} → {last}");
     }
 }

@@ -87,7 +87,7 @@ mod tests {
 
     #[test]
     fn relation_tokens_shape_with_and_without_slot_init() {
-        let device = test_device();
+        let (_guard, device) = test_device();
         let mut cfg = ModelConfig::tiny(Variant::SlotVla { history: 1 });
         let f = Tensor::<3>::random([3, 64, 64], Distribution::Default, &device);
         let z = Tensor::<3>::random([3, 8, 64], Distribution::Default, &device);

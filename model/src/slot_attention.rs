@@ -162,15 +162,15 @@ mod tests {
     use crate::config::Variant;
     use crate::test_device;
 
-    fn setup() -> (SlotAttention, Device) {
-        let device = test_device();
+    fn setup() -> (std::sync::MutexGuard<'static, ()>, SlotAttention, Device) {
+        let (guard, device) = test_device();
         let cfg = ModelConfig::tiny(Variant::SlotVla { history: 1 });
-        (SlotAttention::new(&cfg, &device), device)
+        (guard, SlotAttention::new(&cfg, &device), device)
     }
 
     #[test]
     fn shapes_and_masks_are_distributions_over_slots() {
-        let (sa, device) = setup();
+        let (_guard, sa, device) = setup();
         let f = Tensor::<4>::random([2, 3, 64, 64], Distribution::Default, &device);
         let (slots, masks) = sa.forward(f, None);
         assert_eq!(slots.dims(), [2, 3, 8, 64]);
@@ -182,7 +182,7 @@ mod tests {
 
     #[test]
     fn window_forward_equals_frame_steps() {
-        let (sa, device) = setup();
+        let (_guard, sa, device) = setup();
         let f = Tensor::<4>::random([1, 4, 64, 64], Distribution::Default, &device);
         let (slots, _) = sa.forward(f.clone(), None);
         let mut prev = None;

@@ -147,15 +147,27 @@ impl SlotSsm {
         for (i, block) in self.blocks.iter().enumerate() {
             u = block.frame_part_before(u, feats.clone());
             // Time mixing over [(B·K), T, D].
-            let seq = u.clone().reshape([b, t, k, d]).swap_dims(1, 2).reshape([b * k, t, d]);
+            let seq = u
+                .clone()
+                .reshape([b, t, k, d])
+                .swap_dims(1, 2)
+                .reshape([b * k, t, d]);
             let st = states.as_mut().and_then(|s| s[i].take());
-            let (y, st) = block.mamba.forward(block.norm_time.forward(seq.clone()), st);
+            let (y, st) = block
+                .mamba
+                .forward(block.norm_time.forward(seq.clone()), st);
             new_states.push(st);
             let seq = seq + y;
-            u = seq.reshape([b, k, t, d]).swap_dims(1, 2).reshape([b * t, k, d]);
+            u = seq
+                .reshape([b, k, t, d])
+                .swap_dims(1, 2)
+                .reshape([b * t, k, d]);
             u = block.frame_part_after(u);
         }
-        let out = self.out.forward(self.norm_out.forward(u)).reshape([b, t, k, d]);
+        let out = self
+            .out
+            .forward(self.norm_out.forward(u))
+            .reshape([b, t, k, d]);
         (out, SlotSsmState { blocks: new_states })
     }
 
@@ -171,7 +183,11 @@ impl SlotSsm {
         state: SlotSsmState,
     ) -> (Tensor<3>, SlotSsmState) {
         let [b, k, d] = slots.dims();
-        assert_eq!(state.blocks.len(), self.blocks.len(), "state has the wrong block count");
+        assert_eq!(
+            state.blocks.len(),
+            self.blocks.len(),
+            "state has the wrong block count"
+        );
         let mut u = slots;
         let mut new_states = Vec::with_capacity(self.blocks.len());
         for (block, st) in self.blocks.iter().zip(state.blocks) {
@@ -197,7 +213,7 @@ mod tests {
     use burn::tensor::Distribution;
 
     fn check_parallel_equals_steps(cross: bool, random_state: bool) {
-        let device = test_device();
+        let (_guard, device) = test_device();
         device.seed(3);
         let mut cfg = ModelConfig::tiny(Variant::ESlotSsm {
             oracle_subgoal: false,
@@ -245,7 +261,7 @@ mod tests {
 
     #[test]
     fn output_is_causal() {
-        let device = test_device();
+        let (_guard, device) = test_device();
         let cfg = ModelConfig::tiny(Variant::ESlotSsm {
             oracle_subgoal: false,
         });
@@ -261,7 +277,10 @@ mod tests {
         );
         let (ya, _) = ssm.forward(a, None, None);
         let (yb, _) = ssm.forward(b, None, None);
-        let diff: f32 = (ya.narrow(1, 0, 5) - yb.narrow(1, 0, 5)).abs().max().into_scalar();
+        let diff: f32 = (ya.narrow(1, 0, 5) - yb.narrow(1, 0, 5))
+            .abs()
+            .max()
+            .into_scalar();
         assert!(diff < 1e-6);
     }
 }

@@ -114,7 +114,11 @@ impl TextEncoder {
     /// # Shapes
     /// - ids: `[N, L]` → `[N, D_txt]`
     pub fn pooled(&self, ids: Tensor<2, Int>) -> Tensor<2> {
-        let keep = ids.clone().not_equal_elem(PAD).float().unsqueeze_dim::<3>(2); // [N, L, 1]
+        let keep = ids
+            .clone()
+            .not_equal_elem(PAD)
+            .float()
+            .unsqueeze_dim::<3>(2); // [N, L, 1]
         let x = self.embed.forward(ids) * keep.clone();
         let count = keep.sum_dim(1).clamp_min(1.0); // [N, 1, 1]
         (x.sum_dim(1) / count).squeeze_dim::<2>(1)
@@ -128,7 +132,13 @@ mod tests {
 
     fn cfg() -> TextConfig {
         TextConfig {
-            vocab: vec!["bowl".into(), "on".into(), "plate".into(), "put".into(), "the".into()],
+            vocab: vec![
+                "bowl".into(),
+                "on".into(),
+                "plate".into(),
+                "put".into(),
+                "the".into(),
+            ],
             max_len: 6,
         }
     }
@@ -137,14 +147,17 @@ mod tests {
     fn tokenizer_maps_words_pads_and_cuts() {
         let tok = Tokenizer::new(&cfg());
         assert_eq!(tok.vocab_size(), 7);
-        assert_eq!(tok.encode("Put the bowl on the PLATE."), vec![5, 6, 2, 3, 6, 4]);
+        assert_eq!(
+            tok.encode("Put the bowl on the PLATE."),
+            vec![5, 6, 2, 3, 6, 4]
+        );
         assert_eq!(tok.encode("put the mug"), vec![5, 6, UNK, PAD, PAD, PAD]);
         assert_eq!(tok.encode("the the the the the the the").len(), 6);
     }
 
     #[test]
     fn encoder_shapes_mask_and_pooling() {
-        let device = test_device();
+        let (_guard, device) = test_device();
         let tok = Tokenizer::new(&cfg());
         let enc = TextEncoder::new(&cfg(), 4, &device);
         let ids = tok.encode_batch(&["put the bowl", ""], &device);
@@ -158,7 +171,10 @@ mod tests {
         let w = enc.embed.weight.val();
         let want = (w.clone().narrow(0, 5, 1) + w.clone().narrow(0, 6, 1) + w.narrow(0, 2, 1))
             .div_scalar(3.0);
-        let diff: f32 = (pooled.clone().narrow(0, 0, 1) - want).abs().max().into_scalar();
+        let diff: f32 = (pooled.clone().narrow(0, 0, 1) - want)
+            .abs()
+            .max()
+            .into_scalar();
         assert!(diff < 1e-6);
         let empty: f32 = pooled.narrow(0, 1, 1).abs().max().into_scalar();
         assert_eq!(empty, 0.0);
