@@ -793,6 +793,30 @@ mod tests {
     }
 
     #[test]
+    fn observe_then_act_equals_acting_every_step() {
+        let (_guard, device) = test_device();
+        for name in ["e_slotssm", "slotvla_h8"] {
+            let cfg = micro(name);
+            let model = PolicyModel::new(&cfg, &device).unwrap();
+            let x = batch(&cfg, 1, 6, &device);
+            let frame = |t: usize| x.images.clone().narrow(1, t, 1).squeeze_dim::<4>(1);
+            let mut a = StreamingPolicy::new(model.clone(), &device).unwrap();
+            let mut b = StreamingPolicy::new(model, &device).unwrap();
+            let mut last_a = None;
+            for t in 0..6 {
+                last_a = Some(a.act_tensor(frame(t), x.instruction.clone(), None).unwrap());
+                if t < 5 {
+                    b.observe_tensor(frame(t), None).unwrap();
+                }
+            }
+            let last_b = b.act_tensor(frame(5), x.instruction.clone(), None).unwrap();
+            let diff: f32 = (last_a.unwrap() - last_b).abs().max().into_scalar();
+            assert_eq!(diff, 0.0, "{name}");
+            assert_eq!(a.state_floats(), b.state_floats());
+        }
+    }
+
+    #[test]
     fn records_round_trip_and_bad_files_are_errors() {
         let (_guard, device) = test_device();
         let cfg = micro("e_slotssm");

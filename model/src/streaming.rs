@@ -195,6 +195,30 @@ impl StreamingPolicy {
             .collect())
     }
 
+    /// Updates the memory with a frame without decoding actions (e.g. while executing an earlier
+    /// chunk open-loop): cheaper than [`StreamingPolicy::act`], same state afterwards.
+    pub fn observe(&mut self, obs: &Observation, subgoal: Option<&str>) -> Result<()> {
+        let image = image_tensor(obs, self.model.config.image_size, &self.device)?;
+        let subgoal = subgoal.map(|s| {
+            self.tokenizer
+                .encode_batch(&[s], &self.device)
+                .unsqueeze_dim::<3>(1)
+        });
+        self.observe_tensor(image, subgoal)
+    }
+
+    /// [`StreamingPolicy::observe`] on tensors.
+    ///
+    /// # Shapes
+    /// - image: `[1, 3, H, W]` in [0, 1]; subgoal: `[1, G, L_sg]`
+    pub fn observe_tensor(
+        &mut self,
+        image: Tensor<4>,
+        subgoal: Option<Tensor<3, Int>>,
+    ) -> Result<()> {
+        self.advance(image, subgoal).map(|_| ())
+    }
+
     /// One step on tensors (normalised actions).
     ///
     /// # Shapes
@@ -206,6 +230,24 @@ impl StreamingPolicy {
         instruction: Tensor<2, Int>,
         subgoal: Option<Tensor<3, Int>>,
     ) -> Result<Tensor<2>> {
+        let tokens = self.advance(image, subgoal)?;
+        let m = &self.model;
+        let visual = if m.config.variant.history() > 1 {
+            m.stack_history(self.state.history.iter().cloned().collect())
+        } else {
+            tokens
+        };
+        let out = m.decode(visual, None, instruction);
+        let [_, ha, a] = out.actions.dims();
+        Ok(out.actions.reshape([ha, a]))
+    }
+
+    /// Runs everything but the decoder on one frame and updates the carried state.
+    ///
+    /// # Shapes
+    /// - image: `[1, 3, H, W]`; subgoal: `[1, G, L_sg]`
+    /// - output: this frame's decoder tokens `[1, V₁, D_dec]`
+    fn advance(&mut self, image: Tensor<4>, subgoal: Option<Tensor<3, Int>>) -> Result<Tensor<3>> {
         let m = &self.model;
         let cfg = &m.config;
         let [h, w] = cfg.image_size;
@@ -245,19 +287,14 @@ impl StreamingPolicy {
         };
         let tokens = m.frame_tokens(feats, z);
         let history = cfg.variant.history();
-        let visual = if history > 1 {
-            self.state.history.push_back(tokens);
+        if history > 1 {
+            self.state.history.push_back(tokens.clone());
             while self.state.history.len() > history {
                 self.state.history.pop_front();
             }
-            m.stack_history(self.state.history.iter().cloned().collect())
-        } else {
-            tokens
-        };
-        let out = m.decode(visual, None, instruction);
+        }
         self.state.step += 1;
-        let [_, ha, a] = out.actions.dims();
-        Ok(out.actions.reshape([ha, a]))
+        Ok(tokens)
     }
 
     /// Whether the carried state of this variant stays the same size for any episode length.
@@ -339,7 +376,8 @@ mod tests {
         let floats = policy.state_floats();
         assert_eq!(floats, cfg.constant_state_floats());
         policy.act(&obs, "put the bowl on the plate", None).unwrap();
-        assert_eq!(policy.step_count(), 2);
+        policy.observe(&obs, Some("bowl")).unwrap();
+        assert_eq!(policy.step_count(), 3);
         assert_eq!(policy.state_floats(), floats);
         policy.reset();
         assert_eq!(policy.step_count(), 0);
