@@ -433,7 +433,7 @@ impl ModelConfig {
             return err("encoder.strides must be ≥ 1".into());
         }
         let [gh, gw] = self.grid();
-        if self.image_size[0] % gh != 0 || self.image_size[1] % gw != 0 {
+        if !self.image_size[0].is_multiple_of(gh) || !self.image_size[1].is_multiple_of(gw) {
             return err(format!(
                 "image_size {:?} must be a multiple of the feature grid {:?} (slot reconstruction targets are patches)",
                 self.image_size,
@@ -443,10 +443,15 @@ impl ModelConfig {
         if self.slots.num_slots == 0 || self.slots.dim == 0 || self.slots.iters_first == 0 {
             return err("slots: num_slots, dim and iters_first must be ≥ 1".into());
         }
-        if self.slots.dim % self.ssm.heads != 0 || self.slots.dim % self.relation.heads != 0 {
+        if self.ssm.heads == 0 || self.relation.heads == 0 || self.decoder.heads == 0 {
+            return err("ssm.heads, relation.heads and decoder.heads must be ≥ 1".into());
+        }
+        if !self.slots.dim.is_multiple_of(self.ssm.heads)
+            || !self.slots.dim.is_multiple_of(self.relation.heads)
+        {
             return err("slots.dim must be divisible by ssm.heads and relation.heads".into());
         }
-        if self.decoder.width % self.decoder.heads != 0 {
+        if !self.decoder.width.is_multiple_of(self.decoder.heads) {
             return err("decoder.width must be divisible by decoder.heads".into());
         }
         if self.ssm.conv == 0 || self.ssm.state == 0 || self.ssm.inner == 0 || self.ssm.dt_rank == 0
@@ -536,6 +541,11 @@ mod tests {
         assert!(cfg.validate().is_err());
         cfg.variant = Variant::SlotVla { history: 2 };
         cfg.loss.tau = 0.0;
+        assert!(cfg.validate().is_err());
+        let mut cfg = ModelConfig::tiny(Variant::Dense { history: 1 });
+        cfg.decoder.heads = 0;
+        assert!(cfg.validate().is_err());
+        cfg.decoder.heads = 3; // 128 is not a multiple of 3
         assert!(cfg.validate().is_err());
     }
 }
