@@ -24,7 +24,7 @@ pub mod text;
 
 pub use config::{ModelConfig, Variant};
 pub use error::{ModelError, Result};
-pub use policy::{Losses, PolicyModel, WindowBatch, WindowOutput};
+pub use policy::{Carry, Losses, PolicyModel, WindowBatch, WindowOutput};
 pub use streaming::{ActionStats, Observation, StreamingPolicy};
 pub use text::Tokenizer;
 

@@ -20,7 +20,7 @@ use crate::heads::{SlotDecoder, SlotFusion, WindowHead};
 use crate::losses;
 use crate::relation::RelationEncoder;
 use crate::slot_attention::SlotAttention;
-use crate::slot_ssm::SlotSsm;
+use crate::slot_ssm::{SlotSsm, SlotSsmState};
 use crate::text::TextEncoder;
 
 /// A training batch of windows.
@@ -70,6 +70,18 @@ pub struct Losses {
     pub window: Option<Tensor<1>>,
     /// L_sa `[1]`.
     pub slot_recon: Option<Tensor<1>>,
+}
+
+/// Memory carried from one window to the next of the same episodes (truncated BPTT, model.md
+/// §10): the last frame's slots and the SlotSSM state, both detached.
+///
+/// SlotVLA(h > 1) and dense(h > 1) windows still start their history at the window's first frame.
+#[derive(Clone, Debug, Default)]
+pub struct Carry {
+    /// Slots of the last frame `[B, K, D]` (slot variants).
+    pub slots: Option<Tensor<3>>,
+    /// SlotSSM state after the last frame (e_slotssm).
+    pub ssm: Option<SlotSsmState>,
 }
 
 /// Per-frame visual token types added before the decoder.
@@ -307,6 +319,22 @@ impl PolicyModel {
         instruction: Tensor<2, Int>,
         subgoal: Option<Tensor<4, Int>>,
     ) -> Result<WindowOutput> {
+        self.predict_from(images, instruction, subgoal, Carry::default())
+            .map(|(out, _)| out)
+    }
+
+    /// Prediction over windows that continue from `carry` (the memory after the previous
+    /// window); returns the memory after this window, detached.
+    ///
+    /// # Shapes
+    /// - as [`PolicyModel::predict`]; carry slots `[B, K, D]`, SSM state over B·K sequences
+    pub fn predict_from(
+        &self,
+        images: Tensor<5>,
+        instruction: Tensor<2, Int>,
+        subgoal: Option<Tensor<4, Int>>,
+        carry: Carry,
+    ) -> Result<(WindowOutput, Carry)> {
         let [b, t, c, h, w] = images.dims();
         let cfg = &self.config;
         if c != 3 || [h, w] != cfg.image_size {
@@ -333,6 +361,20 @@ impl PolicyModel {
         let k = cfg.slots.num_slots;
         let d = cfg.slots.dim;
 
+        if let (Some(ssm), Some(state)) = (&self.slot_ssm, &carry.ssm) {
+            let n_seq = b * cfg.slots.num_slots;
+            let ok = state.blocks.len() == ssm.blocks.len()
+                && state.blocks.iter().all(|s| {
+                    s.h.dims() == [n_seq, cfg.ssm.inner, cfg.ssm.state]
+                        && s.conv.dims() == [n_seq, cfg.ssm.inner, cfg.ssm.conv - 1]
+                });
+            if !ok {
+                return Err(ModelError::Input(
+                    "carried SlotSSM state does not match the model and batch".into(),
+                ));
+            }
+        }
+        let mut new_carry = Carry::default();
         let mut out = WindowOutput {
             actions: Tensor::zeros([1, 1, 1, 1], &device),
             logits: None,
@@ -342,13 +384,29 @@ impl PolicyModel {
             window: None,
         };
         let z = if let Some(sa) = &self.slot_attention {
-            let (slots, masks) = sa.forward(feats.clone(), None);
+            if let Some(prev) = &carry.slots
+                && prev.dims() != [b, k, d]
+            {
+                return Err(ModelError::Input(format!(
+                    "carried slots {:?}, expected [{b}, {k}, {d}]",
+                    prev.dims()
+                )));
+            }
+            let (slots, masks) = sa.forward(feats.clone(), carry.slots.clone());
+            new_carry.slots = Some(
+                slots
+                    .clone()
+                    .narrow(1, t - 1, 1)
+                    .squeeze_dim::<3>(1)
+                    .detach(),
+            );
             out.masks = Some(masks);
             let z = if let (Some(ssm), Some(head), Some(fusion)) =
                 (&self.slot_ssm, &self.window_head, &self.fusion)
             {
                 let ssm_feats = cfg.ssm.cross_attention.then(|| feats.clone());
-                let (pred, _) = ssm.forward(slots.clone(), ssm_feats, None);
+                let (pred, state) = ssm.forward(slots.clone(), ssm_feats, carry.ssm.clone());
+                new_carry.ssm = Some(state.detach());
                 out.window = Some(head.forward(pred.clone(), slots.clone()));
                 let sub = subgoal.map(|s| {
                     let [_, _, g, l] = s.dims();
@@ -386,7 +444,7 @@ impl PolicyModel {
         out.logits = dec
             .logits
             .map(|l| l.reshape([b, t, ha, a, crate::decoder::NUM_BINS]));
-        Ok(out)
+        Ok((out, new_carry))
     }
 
     /// History tokens for every frame of a window: frame t sees frames t−h+1 … t; frames before
@@ -440,8 +498,20 @@ impl PolicyModel {
         (visual, Some(Tensor::cat(pads, 1).equal_elem(1.0)))
     }
 
-    /// Training forward: predictions and all losses of a window batch.
+    /// Training forward: predictions and all losses of a window batch (windows start from an
+    /// empty memory).
     pub fn forward(&self, batch: &WindowBatch) -> Result<(WindowOutput, Losses)> {
+        self.forward_from(batch, Carry::default())
+            .map(|(out, losses, _)| (out, losses))
+    }
+
+    /// Training forward from carried memory (truncated BPTT); also returns the memory after
+    /// the window, detached.
+    pub fn forward_from(
+        &self,
+        batch: &WindowBatch,
+        carry: Carry,
+    ) -> Result<(WindowOutput, Losses, Carry)> {
         let cfg = &self.config;
         let [b, t, _, _, _] = batch.images.dims();
         let (ha, a) = (cfg.decoder.horizon, cfg.decoder.action_dim);
@@ -452,10 +522,11 @@ impl PolicyModel {
                 batch.frame_mask.dims()
             )));
         }
-        let out = self.predict(
+        let (out, carry) = self.predict_from(
             batch.images.clone(),
             batch.instruction.clone(),
             batch.subgoal.clone(),
+            carry,
         )?;
         let frame_mask = batch.frame_mask.clone();
         let action_mask = batch.action_mask.clone().unwrap_or_else(|| {
@@ -517,6 +588,7 @@ impl PolicyModel {
                 window,
                 slot_recon,
             },
+            carry,
         ))
     }
 }
@@ -814,6 +886,46 @@ mod tests {
             assert_eq!(diff, 0.0, "{name}");
             assert_eq!(a.state_floats(), b.state_floats());
         }
+    }
+
+    #[test]
+    fn two_carried_windows_equal_one_long_window() {
+        let (_guard, device) = test_device();
+        for name in ["e_slotssm", "slotvla_h1"] {
+            let cfg = micro(name);
+            let model = PolicyModel::new(&cfg, &device).unwrap();
+            let x = batch(&cfg, 2, 8, &device);
+            let sub = x.subgoal.clone();
+            let long = model
+                .predict(x.images.clone(), x.instruction.clone(), sub.clone())
+                .unwrap()
+                .actions;
+            let half = |i: usize| x.images.clone().narrow(1, 4 * i, 4);
+            let sub_half = |i: usize| sub.clone().map(|s| s.narrow(1, 4 * i, 4));
+            let (first, carry) = model
+                .predict_from(
+                    half(0),
+                    x.instruction.clone(),
+                    sub_half(0),
+                    Carry::default(),
+                )
+                .unwrap();
+            assert!(carry.slots.is_some());
+            assert_eq!(carry.ssm.is_some(), cfg.variant.has_ssm());
+            let (second, _) = model
+                .predict_from(half(1), x.instruction.clone(), sub_half(1), carry)
+                .unwrap();
+            let joined = Tensor::cat(vec![first.actions, second.actions], 1);
+            let diff: f32 = (joined - long).abs().max().into_scalar();
+            assert!(diff < 1e-4, "{name}: {diff}");
+        }
+        // A carry of the wrong batch size is an error, not a panic.
+        let cfg = micro("e_slotssm");
+        let model = PolicyModel::new(&cfg, &device).unwrap();
+        let x = batch(&cfg, 2, 2, &device);
+        let (_, _, carry) = model.forward_from(&x, Carry::default()).unwrap();
+        let y = batch(&cfg, 1, 2, &device);
+        assert!(model.forward_from(&y, carry).is_err());
     }
 
     #[test]
