@@ -3,9 +3,26 @@
 //!
 //! Layout follows `../shared/spec/model.md`: [`encoder`] (§1), [`slot_attention`] (§2),
 //! [`losses`] (§3, §5, §8), [`mamba`] and [`slot_ssm`] (§4), [`heads`] (§5 windowed head,
-//! §6 slot fusion, L_sa decoder), [`relation`] (§7), [`text`] and [`decoder`] (§8),
+//! §6 slot fusion, the L_sa decoder), [`relation`] (§7), [`text`] and [`decoder`] (§8),
 //! [`policy`] (§9, the variants and the window forward) and [`streaming`] (§10).
-//! The backend is chosen at run time by the [`burn::prelude::Device`].
+//! Model code has no backend parameter: the backend is chosen at run time by the
+//! [`burn::prelude::Device`] (flex or ndarray on CPU; wgpu with this crate's `wgpu` feature).
+//!
+//! Training (one window batch):
+//! ```text
+//! let cfg = ModelConfig::tiny(Variant::from_name("e_slotssm")?).with_vocab_from(instructions);
+//! let device = Device::flex().autodiff();
+//! let model = PolicyModel::new(&cfg, &device)?;
+//! let (out, losses) = model.forward(&WindowBatch { images, actions, frame_mask, .. })?;
+//! let grads = losses.total.backward();           // λ-weighted sum of the terms
+//! ```
+//! Evaluation (per environment step):
+//! ```text
+//! let mut policy = StreamingPolicy::new(PolicyModel::load(&cfg, path, &device)?, &device)?;
+//! policy.reset();
+//! let chunk: Vec<[f32; 7]> = policy.act(&observation, instruction, subgoal)?;   // [H_a][7]
+//! policy.observe(&next_observation, subgoal)?;    // memory update only, while executing a chunk
+//! ```
 
 pub mod blocks;
 pub mod config;

@@ -1007,5 +1007,30 @@ mod tests {
         }
         let initial = first.unwrap();
         assert!(last < 0.1 * initial, "L_act {initial} → {last}");
+
+        // The trained weights act through the streaming policy too (autodiff device given).
+        let plain = Device::flex();
+        let instr = Tokenizer::new(&cfg.text).encode_batch(&[INSTRUCTIONS[0]], &plain);
+        let mut policy = StreamingPolicy::new(model, &device).unwrap();
+        let mut err = 0.0;
+        for t in 0..4 {
+            let img = x
+                .images
+                .clone()
+                .narrow(0, 0, 1)
+                .narrow(1, t, 1)
+                .squeeze_dim::<4>(1);
+            let chunk = policy.act_tensor(img.inner(), instr.clone(), None).unwrap();
+            let target = x.actions.clone().narrow(0, 0, 1).narrow(1, t, 1).inner();
+            err += (chunk - target.reshape([2, 7]))
+                .abs()
+                .mean()
+                .into_scalar::<f32>()
+                / 4.0;
+        }
+        assert!(
+            err < 0.1 * initial,
+            "streamed L1 {err} vs initial {initial}"
+        );
     }
 }

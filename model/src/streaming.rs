@@ -38,6 +38,16 @@ pub struct ActionStats {
 }
 
 impl ActionStats {
+    /// ā = clip(2(a − q01)/(q99 − q01 + 1e-8) − 1, −1, 1) for dims 0–5; the gripper is left as is.
+    pub fn normalize(&self, a: [f32; 7]) -> [f32; 7] {
+        let mut out = a;
+        for i in 0..6 {
+            let v = 2.0 * (a[i] - self.q01[i]) / (self.q99[i] - self.q01[i] + 1e-8) - 1.0;
+            out[i] = v.clamp(-1.0, 1.0);
+        }
+        out
+    }
+
     /// a = (ā + 1)/2 · (q99 − q01) + q01 for dims 0–5; the gripper (dim 6) is left as is.
     pub fn unnormalize(&self, a: [f32; 7]) -> [f32; 7] {
         let mut out = a;
@@ -111,7 +121,8 @@ pub struct StreamingPolicy {
 }
 
 impl StreamingPolicy {
-    /// Wraps a trained model (its weights are used as they are, without autodiff).
+    /// Wraps a trained model (its weights are used as they are, without autodiff; an autodiff
+    /// `device` is used without it too).
     pub fn new(model: PolicyModel, device: &Device) -> Result<Self> {
         if model.config.decoder.action_dim != 7 {
             return Err(ModelError::Config(
@@ -122,7 +133,7 @@ impl StreamingPolicy {
         Ok(StreamingPolicy {
             model: model.valid(),
             tokenizer,
-            device: device.clone(),
+            device: device.clone().without_autodiff(),
             stats: None,
             state: StreamState::default(),
         })
@@ -337,13 +348,18 @@ mod tests {
     }
 
     #[test]
-    fn unnormalize_leaves_the_gripper() {
+    fn normalization_round_trips_clips_and_leaves_the_gripper() {
         let stats = ActionStats {
             q01: [-2.0; 7],
             q99: [2.0; 7],
         };
         let a = stats.unnormalize([1.0, -1.0, 0.0, 0.5, 0.0, 0.0, -1.0]);
         assert_eq!(a, [2.0, -2.0, 0.0, 1.0, 0.0, 0.0, -1.0]);
+        let n = stats.normalize([2.0, -2.0, 0.0, 1.0, 9.0, -9.0, 1.0]);
+        let want = [1.0, -1.0, 0.0, 0.5, 1.0, -1.0, 1.0];
+        for (x, y) in n.iter().zip(want) {
+            assert!((x - y).abs() < 1e-6, "{n:?}");
+        }
     }
 
     #[test]
