@@ -530,6 +530,13 @@ mod tests {
         assert_eq!(back, cfg);
         let bad = json.replacen("\"image_size\"", "\"imagesize\"", 1);
         assert!(serde_json::from_str::<ModelConfig>(&bad).is_err());
+        let v: Variant = serde_json::from_str(r#"{"kind": "slotvla", "history": 8}"#).unwrap();
+        assert_eq!(v, Variant::SlotVla { history: 8 });
+        let v: Variant =
+            serde_json::from_str(r#"{"kind": "e_slotssm", "oracle_subgoal": true}"#).unwrap();
+        assert_eq!(v.name(), "e_slotssm_oracle");
+        assert!(serde_json::from_str::<Variant>(r#"{"kind": "dense", "histroy": 2}"#).is_err());
+        assert!(serde_json::from_str::<Variant>(r#"{"kind": "slotssm"}"#).is_err());
     }
 
     #[test]
