@@ -4,8 +4,8 @@
 //!    SlotVLA(h=1) measured in the same run.
 //! 2. The token-scaling table of the paper's figure: per-step streaming latency and carried
 //!    memory of SlotVLA(h) for h ∈ {1, 8, 32, 128} against e_slotssm at episode steps 1, 100 and
-//!    700, on one thread (flex backend); the three steps are timed in turn so that load
-//!    changes on a shared machine hit them alike. Target for e_slotssm: latency(700)/latency(1) ≤ 1.1 and
+//!    700, on one thread (flex backend); every cell is timed round-robin so that load changes
+//!    on a shared machine hit them alike. Target for e_slotssm: latency(700)/latency(1) ≤ 1.1 and
 //!    ≤ 20 ms per step.
 //!
 //! Run: `cargo bench -p model` (add `--profile dev` to reuse the dev build: dependencies are
@@ -70,60 +70,83 @@ struct StepFigures {
     floats: [usize; 3],
 }
 
-/// Per-step streaming latency (ms) and carried floats at steps 1, 100 and 700.
-///
-/// Three policies share the weights: one is reset before every measured act (step 1), the other
-/// two are brought to steps 99 and 699 with `observe` (memory update, no decoding). Then the
-/// three acts are timed in turn, `reps` times, so that a change of machine load hits all three
-/// alike; the medians are reported.
-fn streaming_figures(variant: &str, reps: usize) -> StepFigures {
-    let device = Device::flex();
-    device.seed(0);
-    let cfg = config(variant);
-    let model = PolicyModel::new(&cfg, &device).expect("model");
-    let tok = Tokenizer::new(&cfg.text);
-    let instr = tok.encode_batch(&[INSTRUCTION], &device);
-    let frames: Vec<Tensor<4>> = (0..16)
-        .map(|_| Tensor::random([1, 3, 64, 64], Distribution::Uniform(0.0, 1.0), &device))
-        .collect();
-    let mut policies: Vec<StreamingPolicy> = (0..3)
-        .map(|_| StreamingPolicy::new(model.clone(), &device).expect("policy"))
-        .collect();
-    for (policy, target) in policies.iter_mut().zip([1usize, 100, 700]) {
-        while policy.step_count() + 1 < target {
-            let frame = frames[policy.step_count() % frames.len()].clone();
-            policy.observe_tensor(frame, None).expect("observe");
+/// One variant's streaming policies at episode steps 1, 100 and 700, sharing the weights.
+struct Stepper {
+    instr: Tensor<2, Int>,
+    frames: Vec<Tensor<4>>,
+    /// Policy 0 is reset before every measured act (step 1); 1 and 2 sit at steps 100 and 700.
+    policies: Vec<StreamingPolicy>,
+    times: [Vec<f64>; 3],
+}
+
+impl Stepper {
+    fn new(variant: &str) -> Self {
+        let device = Device::flex();
+        device.seed(0);
+        let cfg = config(variant);
+        let model = PolicyModel::new(&cfg, &device).expect("model");
+        let instr = Tokenizer::new(&cfg.text).encode_batch(&[INSTRUCTION], &device);
+        let frames: Vec<Tensor<4>> = (0..16)
+            .map(|_| Tensor::random([1, 3, 64, 64], Distribution::Uniform(0.0, 1.0), &device))
+            .collect();
+        let mut policies: Vec<StreamingPolicy> = (0..3)
+            .map(|_| StreamingPolicy::new(model.clone(), &device).expect("policy"))
+            .collect();
+        // Bring policies 1 and 2 to just before steps 100 and 700 (memory updates only).
+        for (policy, target) in policies.iter_mut().zip([1usize, 100, 700]) {
+            while policy.step_count() + 1 < target {
+                let frame = frames[policy.step_count() % frames.len()].clone();
+                policy.observe_tensor(frame, None).expect("observe");
+            }
+        }
+        Stepper {
+            instr,
+            frames,
+            policies,
+            times: [Vec::new(), Vec::new(), Vec::new()],
         }
     }
-    let act_ms = |policy: &mut StreamingPolicy| {
-        let frame = frames[policy.step_count() % frames.len()].clone();
+
+    /// Times one act of policy `i`, ms.
+    fn act(&mut self, i: usize, record: bool) {
+        let policy = &mut self.policies[i];
+        if i == 0 {
+            policy.reset();
+        }
+        let frame = self.frames[policy.step_count() % self.frames.len()].clone();
         let start = Instant::now();
-        let chunk = policy.act_tensor(frame, instr.clone(), None).expect("act");
+        let chunk = policy
+            .act_tensor(frame, self.instr.clone(), None)
+            .expect("act");
         let _ = chunk.into_data();
-        start.elapsed().as_secs_f64() * 1e3
-    };
-    let mut times = [Vec::new(), Vec::new(), Vec::new()];
-    // One untimed round warms caches and allocators.
+        if record {
+            self.times[i].push(start.elapsed().as_secs_f64() * 1e3);
+        }
+    }
+
+    fn figures(&self) -> StepFigures {
+        let min = |v: &Vec<f64>| v.iter().cloned().fold(f64::INFINITY, f64::min);
+        StepFigures {
+            ms: [0, 1, 2].map(|i| median(self.times[i].clone())),
+            min_ms: [0, 1, 2].map(|i| min(&self.times[i])),
+            floats: [0, 1, 2].map(|i| self.policies[i].state_floats()),
+        }
+    }
+}
+
+/// Per-step streaming latency (ms) and carried floats at steps 1, 100 and 700 for every
+/// variant. All acts of all variants are timed round-robin, `reps` rounds after one warm-up
+/// round, so that changes of machine load hit every cell alike; medians are reported.
+fn streaming_table(variants: &[&str], reps: usize) -> Vec<StepFigures> {
+    let mut steppers: Vec<Stepper> = variants.iter().map(|v| Stepper::new(v)).collect();
     for round in 0..=reps {
-        for (i, policy) in policies.iter_mut().enumerate() {
-            if i == 0 {
-                policy.reset();
-            }
-            let ms = act_ms(policy);
-            if round > 0 {
-                times[i].push(ms);
+        for stepper in &mut steppers {
+            for i in 0..3 {
+                stepper.act(i, round > 0);
             }
         }
     }
-    let floats = [0, 1, 2].map(|i| policies[i].state_floats());
-    let min = |v: &Vec<f64>| v.iter().cloned().fold(f64::INFINITY, f64::min);
-    let min_ms = [min(&times[0]), min(&times[1]), min(&times[2])];
-    let [a, b, c] = times;
-    StepFigures {
-        ms: [median(a), median(b), median(c)],
-        min_ms,
-        floats,
-    }
+    steppers.iter().map(Stepper::figures).collect()
 }
 
 fn main() {
@@ -133,11 +156,11 @@ fn main() {
         .build_global()
         .expect("rayon pool");
     let quick = std::env::var("BENCH_QUICK").is_ok();
-    let (train_reps, step_reps) = if quick { (1, 5) } else { (3, 21) };
+    let (train_reps, step_reps) = if quick { (1, 5) } else { (3, 25) };
 
     let only = std::env::var("BENCH_ONLY").ok();
     if let Some(v) = &only {
-        let f = streaming_figures(v, step_reps);
+        let f = streaming_table(&[v.as_str()], step_reps).remove(0);
         println!(
             "{v}: median ms {:?}, min ms {:?}, floats {:?}",
             f.ms, f.min_ms, f.floats
@@ -158,21 +181,23 @@ fn main() {
 
     println!();
     println!("# Streaming per-step latency and carried state (tiny, flex, 1 thread)");
-    println!("(median of {step_reps} interleaved acts per step; 700/1 also from the minima)");
+    println!(
+        "(median of {step_reps} rounds; every cell timed round-robin; 700/1 also from the minima)"
+    );
     println!(
         "{:<14} {:>9} {:>9} {:>9} {:>11} {:>11} {:>11} {:>8} {:>10}",
         "variant", "ms@1", "ms@100", "ms@700", "KiB@1", "KiB@100", "KiB@700", "700/1", "min 700/1"
     );
-    let mut ssm = None;
-    for v in [
+    let variants = [
         "slotvla_h1",
         "slotvla_h8",
         "slotvla_h32",
         "slotvla_h128",
         "e_slotssm",
-    ] {
-        let f = streaming_figures(v, step_reps);
-        let kib = |n: usize| n as f64 * 4.0 / 1024.0;
+    ];
+    let table = streaming_table(&variants, step_reps);
+    let kib = |n: usize| n as f64 * 4.0 / 1024.0;
+    for (v, f) in variants.iter().zip(&table) {
         println!(
             "{:<14} {:>9.2} {:>9.2} {:>9.2} {:>11.1} {:>11.1} {:>11.1} {:>8.2} {:>10.2}",
             v,
@@ -185,10 +210,8 @@ fn main() {
             f.ms[2] / f.ms[0],
             f.min_ms[2] / f.min_ms[0]
         );
-        if v == "e_slotssm" {
-            ssm = Some(f);
-        }
     }
+    let ssm = table.last();
     let f = ssm.expect("measured");
     let ratio = f.ms[2] / f.ms[0];
     let min_ratio = f.min_ms[2] / f.min_ms[0];
