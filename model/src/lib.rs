@@ -24,6 +24,8 @@
 //! policy.observe(&next_observation, subgoal)?;    // memory update only, while executing a chunk
 //! ```
 
+#![warn(missing_docs)]
+
 pub mod blocks;
 pub mod config;
 pub mod decoder;
