@@ -1,1 +1,75 @@
-//! Embodied-SlotSSM and its baselines in Burn. (Not built yet: see the model issue.)
+//! Embodied-SlotSSM and its baselines (SlotVLA(h), dense patches) in Burn, with a parallel
+//! training forward over windows and a constant-memory streaming policy.
+//!
+//! Layout follows `../shared/spec/model.md`: [`encoder`] (§1), [`slot_attention`] (§2),
+//! [`losses`] (§3, §5, §8), [`mamba`] and [`slot_ssm`] (§4), [`heads`] (§5 windowed head,
+//! §6 slot fusion, the L_sa decoder), [`relation`] (§7), [`text`] and [`decoder`] (§8),
+//! [`policy`] (§9, the variants and the window forward) and [`streaming`] (§10).
+//! Model code has no backend parameter: the backend is chosen at run time by the
+//! [`burn::prelude::Device`] (flex or ndarray on CPU; wgpu with this crate's `wgpu` feature).
+//!
+//! Training (one window batch):
+//! ```text
+//! let cfg = ModelConfig::tiny(Variant::from_name("e_slotssm")?).with_vocab_from(instructions);
+//! let device = Device::flex().autodiff();
+//! let model = PolicyModel::new(&cfg, &device)?;
+//! let (out, losses) = model.forward(&WindowBatch { images, actions, frame_mask, .. })?;
+//! let grads = losses.total.backward();           // λ-weighted sum of the terms
+//! ```
+//! Evaluation (per environment step):
+//! ```text
+//! let mut policy = StreamingPolicy::new(PolicyModel::load(&cfg, path, &device)?, &device)?;
+//! policy.reset();
+//! let chunk: Vec<[f32; 7]> = policy.act(&observation, instruction, subgoal)?;   // [H_a][7]
+//! policy.observe(&next_observation, subgoal)?;    // memory update only, while executing a chunk
+//! ```
+
+#![warn(missing_docs)]
+
+pub mod blocks;
+pub mod config;
+pub mod decoder;
+pub mod encoder;
+pub mod error;
+pub mod heads;
+pub mod losses;
+pub mod mamba;
+pub mod policy;
+pub mod relation;
+pub mod slot_attention;
+pub mod slot_ssm;
+pub mod streaming;
+pub mod text;
+
+pub use config::{ModelConfig, Variant};
+pub use error::{ModelError, Result};
+pub use policy::{Carry, Losses, PolicyModel, WindowBatch, WindowOutput};
+pub use streaming::{ActionStats, Observation, StreamingPolicy};
+pub use text::Tokenizer;
+
+/// The CPU device of the unit tests (flex, pure Rust), seeded with 0.
+///
+/// Burn's RNG may be global, and the test harness runs tests on several threads: the returned
+/// guard holds a process-wide lock until the test ends, so that a seed really fixes every
+/// random draw of that test (same seed → same result).
+#[cfg(test)]
+pub(crate) fn test_device() -> (std::sync::MutexGuard<'static, ()>, burn::prelude::Device) {
+    seeded(burn::prelude::Device::flex())
+}
+
+/// [`test_device`] with autodiff.
+#[cfg(test)]
+pub(crate) fn test_autodiff_device() -> (std::sync::MutexGuard<'static, ()>, burn::prelude::Device)
+{
+    seeded(burn::prelude::Device::flex().autodiff())
+}
+
+#[cfg(test)]
+fn seeded(
+    device: burn::prelude::Device,
+) -> (std::sync::MutexGuard<'static, ()>, burn::prelude::Device) {
+    static LOCK: std::sync::Mutex<()> = std::sync::Mutex::new(());
+    let guard = LOCK.lock().unwrap_or_else(|e| e.into_inner());
+    device.seed(0);
+    (guard, device)
+}

@@ -1,0 +1,558 @@
+//! Model configuration: serde structs with `tiny` (CPU) and `full` (GPU) presets (model.md §0).
+//!
+//! Every struct denies unknown fields, so a typo in a TOML file is an error, not a silent default.
+
+use serde::{Deserialize, Serialize};
+
+use crate::error::{ModelError, Result};
+
+/// Which policy the config builds (model.md §9). All variants share one interface.
+#[derive(Serialize, Deserialize, Clone, Copy, Debug, PartialEq, Eq)]
+#[serde(tag = "kind", deny_unknown_fields)]
+pub enum Variant {
+    #[serde(rename = "e_slotssm")]
+    /// Embodied-SlotSSM: slot attention, SlotSSM memory, windowed head, slot fusion, relation tokens.
+    ESlotSsm {
+        /// Use per-frame oracle subgoal text (else a learned null subgoal vector).
+        oracle_subgoal: bool,
+    },
+    /// SlotVLA: slots + relation tokens of the last `history` frames, no SSM (h = 1 is Markovian).
+    #[serde(rename = "slotvla")]
+    SlotVla {
+        /// Number of frames whose tokens are concatenated (h ≥ 1).
+        history: usize,
+    },
+    /// Dense patch tokens of the last `history` frames, no slots.
+    #[serde(rename = "dense")]
+    Dense {
+        /// Number of frames whose patch tokens are concatenated (h ≥ 1).
+        history: usize,
+    },
+}
+
+impl Variant {
+    /// Parses `e_slotssm`, `e_slotssm_oracle`, `slotvla_h<N>`, `dense` or `dense_h<N>`.
+    pub fn from_name(name: &str) -> Result<Self> {
+        let unknown = || ModelError::UnknownVariant(name.to_string());
+        match name {
+            "e_slotssm" => Ok(Variant::ESlotSsm {
+                oracle_subgoal: false,
+            }),
+            "e_slotssm_oracle" => Ok(Variant::ESlotSsm {
+                oracle_subgoal: true,
+            }),
+            "dense" => Ok(Variant::Dense { history: 1 }),
+            _ => {
+                if let Some(h) = name.strip_prefix("slotvla_h") {
+                    let history = h.parse::<usize>().map_err(|_| unknown())?;
+                    Ok(Variant::SlotVla { history })
+                } else if let Some(h) = name.strip_prefix("dense_h") {
+                    let history = h.parse::<usize>().map_err(|_| unknown())?;
+                    Ok(Variant::Dense { history })
+                } else {
+                    Err(unknown())
+                }
+            }
+        }
+    }
+
+    /// The canonical name (inverse of [`Variant::from_name`]).
+    pub fn name(&self) -> String {
+        match self {
+            Variant::ESlotSsm {
+                oracle_subgoal: false,
+            } => "e_slotssm".into(),
+            Variant::ESlotSsm {
+                oracle_subgoal: true,
+            } => "e_slotssm_oracle".into(),
+            Variant::SlotVla { history } => format!("slotvla_h{history}"),
+            Variant::Dense { history: 1 } => "dense".into(),
+            Variant::Dense { history } => format!("dense_h{history}"),
+        }
+    }
+
+    /// Frames of tokens the decoder sees per step (1 for the SSM model).
+    pub fn history(&self) -> usize {
+        match self {
+            Variant::ESlotSsm { .. } => 1,
+            Variant::SlotVla { history } | Variant::Dense { history } => *history,
+        }
+    }
+
+    /// Whether the variant uses slot attention.
+    pub fn has_slots(&self) -> bool {
+        !matches!(self, Variant::Dense { .. })
+    }
+
+    /// Whether the variant has the SlotSSM, windowed head and slot fusion.
+    pub fn has_ssm(&self) -> bool {
+        matches!(self, Variant::ESlotSsm { .. })
+    }
+}
+
+/// Visual encoder (model.md §1): a CNN, soft position embedding, LN and MLP.
+#[derive(Serialize, Deserialize, Clone, Debug, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct EncoderConfig {
+    /// Output channels of each 5×5 conv (stride given by `strides`).
+    pub channels: Vec<usize>,
+    /// Stride of each 5×5 conv (same length as `channels`).
+    pub strides: Vec<usize>,
+    /// Feature width D_f (channels of the final 3×3 conv and of the output).
+    pub feature_dim: usize,
+}
+
+/// Slot attention (model.md §2).
+#[derive(Serialize, Deserialize, Clone, Debug, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct SlotConfig {
+    /// Number of slots K.
+    pub num_slots: usize,
+    /// Slot / model width D.
+    pub dim: usize,
+    /// Iterations on the first frame.
+    pub iters_first: usize,
+    /// Iterations on later frames (initialised from the previous frame's slots).
+    pub iters_later: usize,
+}
+
+/// SlotSSM stack and its Mamba mixer (model.md §4).
+#[derive(Serialize, Deserialize, Clone, Debug, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct SsmConfig {
+    /// Number of SlotSSM blocks.
+    pub blocks: usize,
+    /// Heads of the inter-slot attention.
+    pub heads: usize,
+    /// Mamba inner width E.
+    pub inner: usize,
+    /// Mamba state size S.
+    pub state: usize,
+    /// Causal conv kernel width.
+    pub conv: usize,
+    /// Rank of the Δ projection.
+    pub dt_rank: usize,
+    /// Cross-attention from slots to patches in every block.
+    pub cross_attention: bool,
+    /// Feed-forward sub-block (hidden 4D) in every block.
+    pub ffn: bool,
+}
+
+/// Windowed prediction head (model.md §5).
+#[derive(Serialize, Deserialize, Clone, Debug, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct WindowConfig {
+    /// p: offsets −p+1 … 0.
+    pub past: usize,
+    /// q: offsets +1 … +q.
+    pub future: usize,
+}
+
+impl WindowConfig {
+    /// The P = p + q offsets o_j, in order (−p+1, …, 0, …, +q).
+    pub fn offsets(&self) -> Vec<i64> {
+        let p = self.past as i64;
+        let q = self.future as i64;
+        (-p + 1..=q).collect()
+    }
+}
+
+/// Relation encoder (model.md §7).
+#[derive(Serialize, Deserialize, Clone, Debug, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct RelationConfig {
+    /// Number of relation tokens L.
+    pub tokens: usize,
+    /// Layers.
+    pub layers: usize,
+    /// Attention heads.
+    pub heads: usize,
+}
+
+/// Which action head the decoder ends with (model.md §8).
+#[derive(Serialize, Deserialize, Clone, Copy, Debug, PartialEq, Eq)]
+#[serde(rename_all = "snake_case")]
+pub enum ActionHead {
+    /// Continuous chunk, L1 loss (OpenVLA-OFT).
+    L1,
+    /// 256-bin classification per dimension, cross-entropy (OpenVLA).
+    Bins,
+}
+
+/// Action decoder (model.md §8).
+#[derive(Serialize, Deserialize, Clone, Debug, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct DecoderConfig {
+    /// Width D_dec.
+    pub width: usize,
+    /// Transformer layers.
+    pub layers: usize,
+    /// Attention heads.
+    pub heads: usize,
+    /// Chunk length H_a.
+    pub horizon: usize,
+    /// Action dims A (7).
+    pub action_dim: usize,
+    /// Head kind.
+    pub head: ActionHead,
+}
+
+/// Language: word-level tokenizer over a fixed vocabulary + learned embeddings (model.md §8).
+#[derive(Serialize, Deserialize, Clone, Debug, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct TextConfig {
+    /// Known words (lower case); id 0 is padding, 1 unknown, word i has id i + 2.
+    pub vocab: Vec<String>,
+    /// Maximum tokens per text (longer texts are cut).
+    pub max_len: usize,
+}
+
+/// Loss weights and the contrastive temperature (model.md §3, §8).
+#[derive(Serialize, Deserialize, Clone, Debug, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct LossConfig {
+    /// λ_act.
+    pub action: f64,
+    /// λ_tc.
+    pub contrastive: f64,
+    /// λ_win.
+    pub window: f64,
+    /// λ_sa (0 turns the slot decoder off: it is then not built).
+    pub slot_recon: f64,
+    /// Contrastive temperature τ.
+    pub tau: f64,
+    /// Hidden width of the spatial-broadcast slot decoder.
+    pub sa_hidden: usize,
+}
+
+/// The whole model.
+#[derive(Serialize, Deserialize, Clone, Debug, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct ModelConfig {
+    /// Which policy.
+    pub variant: Variant,
+    /// Input image size [H, W] (agentview, RGB).
+    pub image_size: [usize; 2],
+    /// Visual encoder.
+    pub encoder: EncoderConfig,
+    /// Slot attention.
+    pub slots: SlotConfig,
+    /// SlotSSM.
+    pub ssm: SsmConfig,
+    /// Windowed head.
+    pub window: WindowConfig,
+    /// Relation encoder.
+    pub relation: RelationConfig,
+    /// Action decoder.
+    pub decoder: DecoderConfig,
+    /// Text.
+    pub text: TextConfig,
+    /// Losses.
+    pub loss: LossConfig,
+}
+
+impl ModelConfig {
+    /// The tiny CPU config of model.md §0 (64×64, K = 8, D = 64, T = 16 windows).
+    pub fn tiny(variant: Variant) -> Self {
+        ModelConfig {
+            variant,
+            image_size: [64, 64],
+            encoder: EncoderConfig {
+                channels: vec![32, 64, 64],
+                strides: vec![2, 2, 2],
+                feature_dim: 64,
+            },
+            slots: SlotConfig {
+                num_slots: 8,
+                dim: 64,
+                iters_first: 3,
+                iters_later: 1,
+            },
+            ssm: SsmConfig {
+                blocks: 2,
+                heads: 4,
+                inner: 128,
+                state: 8,
+                conv: 4,
+                dt_rank: 4,
+                cross_attention: false,
+                ffn: true,
+            },
+            window: WindowConfig { past: 6, future: 2 },
+            relation: RelationConfig {
+                tokens: 8,
+                layers: 2,
+                heads: 4,
+            },
+            decoder: DecoderConfig {
+                width: 128,
+                layers: 2,
+                heads: 4,
+                horizon: 4,
+                action_dim: 7,
+                head: ActionHead::L1,
+            },
+            text: TextConfig {
+                vocab: Vec::new(),
+                max_len: 32,
+            },
+            loss: LossConfig {
+                action: 1.0,
+                contrastive: 0.5,
+                window: 1.0,
+                slot_recon: 1.0,
+                tau: 1.0,
+                sa_hidden: 64,
+            },
+        }
+    }
+
+    /// The full GPU config of model.md §0 (K = 16, D = 512, P = 32, 16 relation tokens).
+    ///
+    /// The visual encoder is a CNN trained from scratch (224 → 14×14 patches, D_f = 256): the
+    /// frozen DINOv2+SigLIP backbone of the paper is not available in Rust.
+    pub fn full(variant: Variant) -> Self {
+        ModelConfig {
+            variant,
+            image_size: [224, 224],
+            encoder: EncoderConfig {
+                channels: vec![64, 128, 256, 256],
+                strides: vec![2, 2, 2, 2],
+                feature_dim: 256,
+            },
+            slots: SlotConfig {
+                num_slots: 16,
+                dim: 512,
+                iters_first: 3,
+                iters_later: 1,
+            },
+            ssm: SsmConfig {
+                blocks: 3,
+                heads: 8,
+                inner: 1024,
+                state: 16,
+                conv: 4,
+                dt_rank: 32,
+                cross_attention: true,
+                ffn: true,
+            },
+            window: WindowConfig {
+                past: 26,
+                future: 6,
+            },
+            relation: RelationConfig {
+                tokens: 16,
+                layers: 3,
+                heads: 4,
+            },
+            decoder: DecoderConfig {
+                width: 512,
+                layers: 6,
+                heads: 8,
+                horizon: 8,
+                action_dim: 7,
+                head: ActionHead::L1,
+            },
+            text: TextConfig {
+                vocab: Vec::new(),
+                max_len: 32,
+            },
+            loss: LossConfig {
+                action: 1.0,
+                contrastive: 0.5,
+                window: 1.0,
+                slot_recon: 1.0,
+                tau: 1.0,
+                sa_hidden: 1024,
+            },
+        }
+    }
+
+    /// Replaces the vocabulary by the words of `texts` (lower-cased, sorted, unique).
+    pub fn with_vocab_from<'a>(mut self, texts: impl IntoIterator<Item = &'a str>) -> Self {
+        let mut words: Vec<String> = texts.into_iter().flat_map(crate::text::words).collect();
+        words.sort();
+        words.dedup();
+        self.text.vocab = words;
+        self
+    }
+
+    /// Feature grid [gh, gw] of the encoder for `image_size` (M = gh · gw).
+    pub fn grid(&self) -> [usize; 2] {
+        let mut g = self.image_size;
+        for &s in &self.encoder.strides {
+            // 5×5 conv, padding 2: out = floor((n + 4 − 5) / s) + 1
+            g = [(g[0] - 1) / s + 1, (g[1] - 1) / s + 1];
+        }
+        g
+    }
+
+    /// Visual tokens per frame M.
+    pub fn num_patches(&self) -> usize {
+        let [h, w] = self.grid();
+        h * w
+    }
+
+    /// Width of one slot-reconstruction target: one RGB patch (patch_h · patch_w · 3).
+    pub fn sa_target_dim(&self) -> usize {
+        let [gh, gw] = self.grid();
+        (self.image_size[0] / gh) * (self.image_size[1] / gw) * 3
+    }
+
+    /// Whether the slot decoder (L_sa) is built.
+    pub fn has_sa_decoder(&self) -> bool {
+        self.variant.has_slots() && self.loss.slot_recon > 0.0
+    }
+
+    /// Floats of streaming state that do not depend on the episode length (model.md §10):
+    /// K·(D + n_ssm·E·(S + d_conv − 1)) for the SSM model, K·D for SlotVLA (its frame buffer
+    /// comes on top and grows up to h frames).
+    pub fn constant_state_floats(&self) -> usize {
+        let k = self.slots.num_slots;
+        let d = self.slots.dim;
+        match self.variant {
+            Variant::ESlotSsm { .. } => {
+                k * (d + self.ssm.blocks * self.ssm.inner * (self.ssm.state + self.ssm.conv - 1))
+            }
+            Variant::SlotVla { .. } => k * d,
+            Variant::Dense { .. } => 0,
+        }
+    }
+
+    /// Checks the config for consistency.
+    pub fn validate(&self) -> Result<()> {
+        let err = |m: String| Err(ModelError::Config(m));
+        if self.encoder.channels.is_empty()
+            || self.encoder.channels.len() != self.encoder.strides.len()
+        {
+            return err(
+                "encoder.channels and encoder.strides must be non-empty and of equal length".into(),
+            );
+        }
+        if self.encoder.strides.contains(&0) {
+            return err("encoder.strides must be ≥ 1".into());
+        }
+        let [gh, gw] = self.grid();
+        if !self.image_size[0].is_multiple_of(gh) || !self.image_size[1].is_multiple_of(gw) {
+            return err(format!(
+                "image_size {:?} must be a multiple of the feature grid {:?} (slot reconstruction targets are patches)",
+                self.image_size,
+                [gh, gw]
+            ));
+        }
+        if self.slots.num_slots == 0 || self.slots.dim == 0 || self.slots.iters_first == 0 {
+            return err("slots: num_slots, dim and iters_first must be ≥ 1".into());
+        }
+        if self.ssm.heads == 0 || self.relation.heads == 0 || self.decoder.heads == 0 {
+            return err("ssm.heads, relation.heads and decoder.heads must be ≥ 1".into());
+        }
+        if !self.slots.dim.is_multiple_of(self.ssm.heads)
+            || !self.slots.dim.is_multiple_of(self.relation.heads)
+        {
+            return err("slots.dim must be divisible by ssm.heads and relation.heads".into());
+        }
+        if !self.decoder.width.is_multiple_of(self.decoder.heads) {
+            return err("decoder.width must be divisible by decoder.heads".into());
+        }
+        if self.ssm.conv == 0 || self.ssm.state == 0 || self.ssm.inner == 0 || self.ssm.dt_rank == 0
+        {
+            return err("ssm: inner, state, conv and dt_rank must be ≥ 1".into());
+        }
+        if self.window.past == 0 {
+            return err("window.past must be ≥ 1 (offset 0 is the current frame)".into());
+        }
+        if self.variant.history() == 0 {
+            return err("history must be ≥ 1".into());
+        }
+        if self.decoder.horizon == 0 || self.decoder.action_dim == 0 {
+            return err("decoder.horizon and decoder.action_dim must be ≥ 1".into());
+        }
+        if self.text.max_len == 0 {
+            return err("text.max_len must be ≥ 1".into());
+        }
+        if self.loss.tau <= 0.0 {
+            return err("loss.tau must be > 0".into());
+        }
+        Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn variant_names_round_trip() {
+        for name in [
+            "e_slotssm",
+            "e_slotssm_oracle",
+            "slotvla_h1",
+            "slotvla_h8",
+            "dense",
+            "dense_h4",
+        ] {
+            assert_eq!(Variant::from_name(name).unwrap().name(), name);
+        }
+        assert!(Variant::from_name("slotvla").is_err());
+        assert!(Variant::from_name("slotvla_hx").is_err());
+    }
+
+    #[test]
+    fn tiny_and_full_are_valid_and_match_the_spec() {
+        let tiny = ModelConfig::tiny(Variant::from_name("e_slotssm").unwrap());
+        tiny.validate().unwrap();
+        assert_eq!(tiny.grid(), [8, 8]);
+        assert_eq!(tiny.num_patches(), 64);
+        assert_eq!(tiny.sa_target_dim(), 192);
+        assert_eq!(tiny.window.offsets(), vec![-5, -4, -3, -2, -1, 0, 1, 2]);
+        // model.md §10: tiny 8·(64 + 2·128·11) floats.
+        assert_eq!(tiny.constant_state_floats(), 8 * (64 + 2 * 128 * 11));
+        let full = ModelConfig::full(Variant::SlotVla { history: 8 });
+        full.validate().unwrap();
+        assert_eq!(full.grid(), [14, 14]);
+        assert_eq!(full.window.offsets().len(), 32);
+        let full_ssm = ModelConfig::full(Variant::ESlotSsm {
+            oracle_subgoal: true,
+        });
+        assert_eq!(full_ssm.constant_state_floats(), 16 * (512 + 3 * 1024 * 19));
+    }
+
+    #[test]
+    fn config_round_trips_through_json_and_rejects_unknown_fields() {
+        let cfg = ModelConfig::tiny(Variant::SlotVla { history: 8 })
+            .with_vocab_from(["Put the bowl on the plate", "open the drawer"]);
+        assert_eq!(
+            cfg.text.vocab,
+            vec!["bowl", "drawer", "on", "open", "plate", "put", "the"]
+        );
+        let json = serde_json::to_string(&cfg).unwrap();
+        let back: ModelConfig = serde_json::from_str(&json).unwrap();
+        assert_eq!(back, cfg);
+        let bad = json.replacen("\"image_size\"", "\"imagesize\"", 1);
+        assert!(serde_json::from_str::<ModelConfig>(&bad).is_err());
+        let v: Variant = serde_json::from_str(r#"{"kind": "slotvla", "history": 8}"#).unwrap();
+        assert_eq!(v, Variant::SlotVla { history: 8 });
+        let v: Variant =
+            serde_json::from_str(r#"{"kind": "e_slotssm", "oracle_subgoal": true}"#).unwrap();
+        assert_eq!(v.name(), "e_slotssm_oracle");
+        assert!(serde_json::from_str::<Variant>(r#"{"kind": "dense", "histroy": 2}"#).is_err());
+        assert!(serde_json::from_str::<Variant>(r#"{"kind": "slotssm"}"#).is_err());
+    }
+
+    #[test]
+    fn validate_rejects_bad_values() {
+        let mut cfg = ModelConfig::tiny(Variant::Dense { history: 1 });
+        cfg.encoder.strides.pop();
+        assert!(cfg.validate().is_err());
+        let mut cfg = ModelConfig::tiny(Variant::SlotVla { history: 0 });
+        assert!(cfg.validate().is_err());
+        cfg.variant = Variant::SlotVla { history: 2 };
+        cfg.loss.tau = 0.0;
+        assert!(cfg.validate().is_err());
+        let mut cfg = ModelConfig::tiny(Variant::Dense { history: 1 });
+        cfg.decoder.heads = 0;
+        assert!(cfg.validate().is_err());
+        cfg.decoder.heads = 3; // 128 is not a multiple of 3
+        assert!(cfg.validate().is_err());
+    }
+}

@@ -1,0 +1,319 @@
+//! Action decoder (model.md §8): a bidirectional pre-LN transformer over
+//! [visual tokens ; language tokens ; H_a·A action queries], then a continuous L1 chunk head
+//! (MLP-ResNet, OpenVLA-OFT) or a 256-bin classification head (OpenVLA).
+
+use burn::module::Param;
+use burn::nn::{LayerNorm, Linear, LinearConfig};
+use burn::prelude::*;
+use burn::tensor::Distribution;
+use burn::tensor::activation::gelu;
+
+use crate::blocks::{FfnBlock, SelfAttnBlock, layer_norm};
+use crate::config::{ActionHead, DecoderConfig};
+
+/// Number of classes of the discrete head (bins 1..=256 of numpy's digitize).
+pub const NUM_BINS: usize = 256;
+
+/// Class (0..=255) of a normalised action value: digitize(clip(a, −1, 1), linspace(−1, 1, 256)) − 1.
+pub fn action_to_class(a: f32) -> usize {
+    let a = a.clamp(-1.0, 1.0);
+    (((a + 1.0) * 127.5).floor() as usize).min(NUM_BINS - 1)
+}
+
+/// Action value of a class: the centre of bin min(class, 254) (255 centres between 256 edges).
+pub fn class_to_action(class: usize) -> f32 {
+    let c = class.min(NUM_BINS - 2) as f32;
+    let lo = -1.0 + 2.0 * c / 255.0;
+    lo + 1.0 / 255.0
+}
+
+/// Tensor form of [`action_to_class`].
+///
+/// # Shapes
+/// - actions: any → same, Int
+pub fn actions_to_classes<const D: usize>(actions: Tensor<D>) -> Tensor<D, Int> {
+    actions
+        .clamp(-1.0, 1.0)
+        .add_scalar(1.0)
+        .mul_scalar(127.5)
+        .floor()
+        .int()
+        .clamp(0, NUM_BINS as i64 - 1)
+}
+
+/// Tensor form of [`class_to_action`].
+///
+/// # Shapes
+/// - classes: any → same, Float
+pub fn classes_to_actions<const D: usize>(classes: Tensor<D, Int>) -> Tensor<D> {
+    classes
+        .clamp(0, NUM_BINS as i64 - 2)
+        .float()
+        .mul_scalar(2.0 / 255.0)
+        .add_scalar(-1.0 + 1.0 / 255.0)
+}
+
+/// One encoder layer: self-attention and FFN, both pre-LN residual.
+#[derive(Module, Debug)]
+pub struct DecoderLayer {
+    /// Self-attention.
+    pub attn: SelfAttnBlock,
+    /// Feed-forward (hidden 4·D_dec).
+    pub ffn: FfnBlock,
+}
+
+/// Pre-LN residual block of the MLP-ResNet head.
+#[derive(Module, Debug)]
+pub struct ResBlock {
+    /// Norm `[D_dec]`.
+    pub norm: LayerNorm,
+    /// `[D_dec, D_dec]`.
+    pub fc1: Linear,
+    /// `[D_dec, D_dec]`.
+    pub fc2: Linear,
+}
+
+/// Continuous chunk head: [H_a, A·D_dec] → Linear → 2 residual blocks → LN → Linear → A.
+#[derive(Module, Debug)]
+pub struct L1Head {
+    /// `[A·D_dec, D_dec]`.
+    pub input: Linear,
+    /// Residual blocks.
+    pub blocks: Vec<ResBlock>,
+    /// Final norm.
+    pub norm: LayerNorm,
+    /// `[D_dec, A]`.
+    pub output: Linear,
+}
+
+/// Output of the decoder for N frames.
+#[derive(Clone, Debug)]
+pub struct DecoderOutput {
+    /// Normalised action chunk `[N, H_a, A]` (bin centres for the discrete head).
+    pub actions: Tensor<3>,
+    /// Logits `[N, H_a, A, 256]` (discrete head only).
+    pub logits: Option<Tensor<4>>,
+}
+
+/// The action decoder.
+#[derive(Module, Debug)]
+pub struct ActionDecoder {
+    /// Segment embeddings of the language and query segments `[2, D_dec]`.
+    pub segment: Param<Tensor<2>>,
+    /// Learned action queries (with their positions) `[H_a·A, D_dec]`.
+    pub queries: Param<Tensor<2>>,
+    /// Transformer layers.
+    pub layers: Vec<DecoderLayer>,
+    /// Final norm.
+    pub norm: LayerNorm,
+    /// Continuous head.
+    pub l1: Option<L1Head>,
+    /// Discrete head `[D_dec, 256]`.
+    pub bins: Option<Linear>,
+    /// H_a.
+    pub horizon: usize,
+    /// A.
+    pub action_dim: usize,
+}
+
+impl ActionDecoder {
+    /// Builds the decoder of `config`.
+    pub fn new(config: &DecoderConfig, device: &Device) -> Self {
+        let w = config.width;
+        let (h, a) = (config.horizon, config.action_dim);
+        let normal = Distribution::Normal(0.0, 0.02);
+        ActionDecoder {
+            segment: Param::from_tensor(Tensor::random([2, w], normal, device)),
+            queries: Param::from_tensor(Tensor::random([h * a, w], normal, device)),
+            layers: (0..config.layers)
+                .map(|_| DecoderLayer {
+                    attn: SelfAttnBlock::new(w, config.heads, device),
+                    ffn: FfnBlock::new(w, 4 * w, device),
+                })
+                .collect(),
+            norm: layer_norm(w, device),
+            l1: (config.head == ActionHead::L1).then(|| L1Head {
+                input: LinearConfig::new(a * w, w).init(device),
+                blocks: (0..2)
+                    .map(|_| ResBlock {
+                        norm: layer_norm(w, device),
+                        fc1: LinearConfig::new(w, w).init(device),
+                        fc2: LinearConfig::new(w, w).init(device),
+                    })
+                    .collect(),
+                norm: layer_norm(w, device),
+                output: LinearConfig::new(w, a).init(device),
+            }),
+            bins: (config.head == ActionHead::Bins)
+                .then(|| LinearConfig::new(w, NUM_BINS).init(device)),
+            horizon: h,
+            action_dim: a,
+        }
+    }
+
+    /// Width D_dec.
+    pub fn width(&self) -> usize {
+        self.queries.dims()[1]
+    }
+
+    /// Decodes one action chunk per frame.
+    ///
+    /// # Shapes
+    /// - visual: `[N, V, D_dec]` (segment/frame embeddings already added)
+    /// - visual_pad: `[N, V]`, true = masked (history frames before the episode start)
+    /// - lang: `[N, L_txt, D_dec]`, lang_pad: `[N, L_txt]`
+    /// - output: actions `[N, H_a, A]` (+ logits `[N, H_a, A, 256]`)
+    pub fn forward(
+        &self,
+        visual: Tensor<3>,
+        visual_pad: Option<Tensor<2, Bool>>,
+        lang: Tensor<3>,
+        lang_pad: Tensor<2, Bool>,
+    ) -> DecoderOutput {
+        let [n, v, w] = visual.dims();
+        let [_, l_txt, _] = lang.dims();
+        assert_shape!(lang, [n, l_txt, w]);
+        assert_shape!(lang_pad, [n, l_txt]);
+        let (h, a) = (self.horizon, self.action_dim);
+        let q = h * a;
+        let device = visual.device();
+        let seg = self.segment.val();
+        let lang = lang + seg.clone().narrow(0, 0, 1).unsqueeze_dim::<3>(0);
+        let queries = (self.queries.val() + seg.narrow(0, 1, 1))
+            .unsqueeze_dim::<3>(0)
+            .repeat_dim(0, n);
+        let x = Tensor::cat(vec![visual, lang, queries], 1);
+        let visual_pad =
+            visual_pad.unwrap_or_else(|| Tensor::<2>::zeros([n, v], &device).equal_elem(1.0));
+        let query_pad = Tensor::<2>::zeros([n, q], &device).equal_elem(1.0);
+        let pad = Tensor::cat(vec![visual_pad, lang_pad, query_pad], 1);
+        let mut x = x;
+        for layer in &self.layers {
+            x = layer.attn.forward(x, Some(pad.clone()));
+            x = layer.ffn.forward(x);
+        }
+        let out = self.norm.forward(x.narrow(1, v + l_txt, q)); // [N, H·A, D_dec]
+        if let Some(head) = &self.l1 {
+            let mut y = head.input.forward(out.reshape([n, h, a * w]));
+            for blk in &head.blocks {
+                let r = blk
+                    .fc2
+                    .forward(gelu(blk.fc1.forward(blk.norm.forward(y.clone()))));
+                y = y + r;
+            }
+            DecoderOutput {
+                actions: head.output.forward(head.norm.forward(y)),
+                logits: None,
+            }
+        } else {
+            let logits = self
+                .bins
+                .as_ref()
+                .expect("decoder has a head")
+                .forward(out)
+                .reshape([n, h, a, NUM_BINS]);
+            let classes = logits.clone().argmax(3).squeeze_dim::<3>(3);
+            DecoderOutput {
+                actions: classes_to_actions(classes),
+                logits: Some(logits),
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::test_device;
+
+    fn cfg(head: ActionHead) -> DecoderConfig {
+        DecoderConfig {
+            width: 16,
+            layers: 1,
+            heads: 2,
+            horizon: 3,
+            action_dim: 7,
+            head,
+        }
+    }
+
+    #[test]
+    fn bins_follow_openvla() {
+        assert_eq!(action_to_class(-1.0), 0);
+        assert_eq!(action_to_class(-2.0), 0);
+        assert_eq!(action_to_class(1.0), 255);
+        assert_eq!(action_to_class(0.0), 127);
+        assert!((class_to_action(0) - (-1.0 + 1.0 / 255.0)).abs() < 1e-6);
+        assert_eq!(class_to_action(255), class_to_action(254));
+        // Decoding a value's class lands within half a bin of it.
+        for i in 0..=200 {
+            let a = -1.0 + i as f32 / 100.0;
+            assert!((class_to_action(action_to_class(a)) - a).abs() <= 1.0 / 255.0 + 1e-6);
+        }
+        let (_guard, device) = test_device();
+        let t = Tensor::<1>::from_floats([-1.0, -0.3, 0.0, 0.7, 1.0], &device);
+        let classes = actions_to_classes(t.clone());
+        let want: Vec<i64> = [-1.0f32, -0.3, 0.0, 0.7, 1.0]
+            .iter()
+            .map(|&a| action_to_class(a) as i64)
+            .collect();
+        assert_eq!(
+            classes.clone().into_data().try_to_vec_as::<i64>().unwrap(),
+            want
+        );
+        let back = classes_to_actions(classes)
+            .into_data()
+            .try_to_vec::<f32>()
+            .unwrap();
+        for (b, &c) in back.iter().zip(&want) {
+            assert!((b - class_to_action(c as usize)).abs() < 1e-6);
+        }
+    }
+
+    #[test]
+    fn decoder_shapes_for_both_heads() {
+        let (_guard, device) = test_device();
+        let vis = Tensor::<3>::random([4, 5, 16], Distribution::Default, &device);
+        let lang = Tensor::<3>::random([4, 6, 16], Distribution::Default, &device);
+        let pad = Tensor::<2>::zeros([4, 6], &device).equal_elem(1.0);
+        let out = ActionDecoder::new(&cfg(ActionHead::L1), &device).forward(
+            vis.clone(),
+            None,
+            lang.clone(),
+            pad.clone(),
+        );
+        assert_eq!(out.actions.dims(), [4, 3, 7]);
+        assert!(out.logits.is_none());
+        let out = ActionDecoder::new(&cfg(ActionHead::Bins), &device).forward(vis, None, lang, pad);
+        assert_eq!(out.actions.dims(), [4, 3, 7]);
+        assert_eq!(out.logits.unwrap().dims(), [4, 3, 7, 256]);
+    }
+
+    #[test]
+    fn masked_visual_tokens_do_not_change_the_actions() {
+        let (_guard, device) = test_device();
+        let dec = ActionDecoder::new(&cfg(ActionHead::L1), &device);
+        let vis = Tensor::<3>::random([1, 5, 16], Distribution::Default, &device);
+        let lang = Tensor::<3>::random([1, 6, 16], Distribution::Default, &device);
+        let lpad = Tensor::<2>::zeros([1, 6], &device).equal_elem(1.0);
+        // Tokens 0..2 masked: replacing them by anything, or dropping them, changes nothing.
+        let vpad = Tensor::<2>::from_floats([[1.0, 1.0, 0.0, 0.0, 0.0]], &device).equal_elem(1.0);
+        let other = Tensor::cat(
+            vec![
+                Tensor::random([1, 2, 16], Distribution::Default, &device),
+                vis.clone().narrow(1, 2, 3),
+            ],
+            1,
+        );
+        let a = dec
+            .forward(vis.clone(), Some(vpad.clone()), lang.clone(), lpad.clone())
+            .actions;
+        let b = dec
+            .forward(other, Some(vpad), lang.clone(), lpad.clone())
+            .actions;
+        let c = dec.forward(vis.narrow(1, 2, 3), None, lang, lpad).actions;
+        let d1: f32 = (a.clone() - b).abs().max().into_scalar();
+        let d2: f32 = (a - c).abs().max().into_scalar();
+        assert!(d1 < 1e-5 && d2 < 1e-5, "{d1} {d2}");
+    }
+}

@@ -1,0 +1,160 @@
+//! Slot-level heads: the windowed prediction head "Past MLP" (model.md §5), Slot Fusion (§6)
+//! and the spatial-broadcast slot decoder of L_sa (§2).
+
+use burn::module::Param;
+use burn::nn::{LayerNorm, Linear, LinearConfig};
+use burn::prelude::*;
+use burn::tensor::Distribution;
+use burn::tensor::activation::{relu, softmax};
+
+use crate::blocks::{Act, Mlp, layer_norm};
+
+/// Windowed prediction head: Ŝ = MLP([ŝ_{t+1} ‖ s_t]) predicts s_{t+o_j} for the P offsets.
+#[derive(Module, Debug)]
+pub struct WindowHead {
+    /// MLP 2D → 2D → P·D (GELU).
+    pub mlp: Mlp,
+    /// P.
+    pub window: usize,
+}
+
+impl WindowHead {
+    /// Builds the head for slots of width `d` and `window` = P offsets.
+    pub fn new(d: usize, window: usize, device: &Device) -> Self {
+        WindowHead {
+            mlp: Mlp::new(2 * d, 2 * d, window * d, Act::Gelu, device),
+            window,
+        }
+    }
+
+    /// # Shapes
+    /// - pred (ŝ_{t+1}): `[B, T, K, D]`, slots (s_t): `[B, T, K, D]`
+    /// - output: `[B, T, K, P, D]`
+    pub fn forward(&self, pred: Tensor<4>, slots: Tensor<4>) -> Tensor<5> {
+        let [b, t, k, d] = slots.dims();
+        assert_shape!(pred, [b, t, k, d]);
+        self.mlp
+            .forward(Tensor::cat(vec![pred, slots], 3))
+            .reshape([b, t, k, self.window, d])
+    }
+}
+
+/// Slot Fusion: z = W_o[W₁ LN(s) ‖ W₂ LN(ŝ) ‖ W₃ LN(g)].
+#[derive(Module, Debug)]
+pub struct SlotFusion {
+    /// Norm of s `[D]`.
+    pub norm_s: LayerNorm,
+    /// Norm of ŝ `[D]`.
+    pub norm_pred: LayerNorm,
+    /// Norm of g `[D_g]`.
+    pub norm_g: LayerNorm,
+    /// W₁ `[D, D]`.
+    pub w_s: Linear,
+    /// W₂ `[D, D]`.
+    pub w_pred: Linear,
+    /// W₃ `[D_g, D]`.
+    pub w_g: Linear,
+    /// W_o `[3D, D]`.
+    pub out: Linear,
+}
+
+impl SlotFusion {
+    /// Builds the fusion of slots of width `d` and subgoal embeddings of width `d_g`.
+    pub fn new(d: usize, d_g: usize, device: &Device) -> Self {
+        SlotFusion {
+            norm_s: layer_norm(d, device),
+            norm_pred: layer_norm(d, device),
+            norm_g: layer_norm(d_g, device),
+            w_s: LinearConfig::new(d, d).init(device),
+            w_pred: LinearConfig::new(d, d).init(device),
+            w_g: LinearConfig::new(d_g, d).init(device),
+            out: LinearConfig::new(3 * d, d).init(device),
+        }
+    }
+
+    /// # Shapes
+    /// - slots, pred: `[..., K, D]`; subgoal: `[..., K, D_g]`
+    /// - output: `[..., K, D]`
+    pub fn forward<const N: usize>(
+        &self,
+        slots: Tensor<N>,
+        pred: Tensor<N>,
+        subgoal: Tensor<N>,
+    ) -> Tensor<N> {
+        let a = self.w_s.forward(self.norm_s.forward(slots));
+        let b = self.w_pred.forward(self.norm_pred.forward(pred));
+        let c = self.w_g.forward(self.norm_g.forward(subgoal));
+        self.out.forward(Tensor::cat(vec![a, b, c], N - 1))
+    }
+}
+
+/// Spatial-broadcast slot decoder (DINOSAUR-style): every slot plus a learned position embedding
+/// goes through an MLP to (f̂_{k,m}, logit_{k,m}); the reconstruction is Σ_k softmax_k(logit) f̂.
+#[derive(Module, Debug)]
+pub struct SlotDecoder {
+    /// Position embedding P `[M, D]`.
+    pub pos: Param<Tensor<2>>,
+    /// `[D, hidden]`.
+    pub fc1: Linear,
+    /// `[hidden, hidden]`.
+    pub fc2: Linear,
+    /// `[hidden, D_tgt + 1]`.
+    pub fc3: Linear,
+}
+
+impl SlotDecoder {
+    /// Builds a decoder for `m` positions, slots of width `d`, targets of width `d_tgt`.
+    pub fn new(m: usize, d: usize, hidden: usize, d_tgt: usize, device: &Device) -> Self {
+        SlotDecoder {
+            pos: Param::from_tensor(Tensor::random(
+                [m, d],
+                Distribution::Normal(0.0, 0.02),
+                device,
+            )),
+            fc1: LinearConfig::new(d, hidden).init(device),
+            fc2: LinearConfig::new(hidden, hidden).init(device),
+            fc3: LinearConfig::new(hidden, d_tgt + 1).init(device),
+        }
+    }
+
+    /// # Shapes
+    /// - slots: `[N, K, D]`
+    /// - output: (reconstruction `[N, M, D_tgt]`, masks `[N, K, M]`)
+    pub fn forward(&self, slots: Tensor<3>) -> (Tensor<3>, Tensor<3>) {
+        let [n, k, d] = slots.dims();
+        let [m, _] = self.pos.dims();
+        let x = slots.reshape([n, k, 1, d]) + self.pos.val().reshape([1, 1, m, d]);
+        let x = relu(self.fc1.forward(x));
+        let x = relu(self.fc2.forward(x));
+        let x = self.fc3.forward(x); // [N, K, M, D_tgt + 1]
+        let d_out = x.dims()[3];
+        let feats = x.clone().narrow(3, 0, d_out - 1);
+        let logits = x.narrow(3, d_out - 1, 1); // [N, K, M, 1]
+        let masks = softmax(logits, 1);
+        let recon = (feats * masks.clone()).sum_dim(1).squeeze_dim::<3>(1);
+        (recon, masks.squeeze_dim::<3>(3))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::test_device;
+
+    #[test]
+    fn head_shapes() {
+        let (_guard, device) = test_device();
+        let s = Tensor::<4>::random([2, 3, 4, 8], Distribution::Default, &device);
+        let w = WindowHead::new(8, 5, &device).forward(s.clone(), s.clone());
+        assert_eq!(w.dims(), [2, 3, 4, 5, 8]);
+        let g = Tensor::<4>::random([2, 3, 4, 6], Distribution::Default, &device);
+        let z = SlotFusion::new(8, 6, &device).forward(s.clone(), s.clone(), g);
+        assert_eq!(z.dims(), [2, 3, 4, 8]);
+        let (recon, masks) =
+            SlotDecoder::new(16, 8, 12, 192, &device).forward(s.reshape([6, 4, 8]));
+        assert_eq!(recon.dims(), [6, 16, 192]);
+        assert_eq!(masks.dims(), [6, 4, 16]);
+        let sums = masks.sum_dim(1).into_data().try_to_vec::<f32>().unwrap();
+        assert!(sums.iter().all(|v| (v - 1.0).abs() < 1e-5));
+    }
+}
