@@ -449,3 +449,30 @@ variant = "e_slotssm"
         assert!(e.contains("model.overrides"), "{e}");
     }
 }
+
+#[cfg(test)]
+mod shipped {
+    use super::*;
+
+    /// Every config in `configs/` loads, resolves its model and names its run after the file.
+    #[test]
+    fn shipped_configs_are_valid() {
+        let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../configs");
+        let mut names = vec![];
+        for e in std::fs::read_dir(&dir).unwrap() {
+            let p = e.unwrap().path();
+            if p.extension().is_some_and(|x| x == "toml") {
+                let c = Config::load(&p).unwrap_or_else(|e| panic!("{e}"));
+                let stem = p.file_stem().unwrap().to_string_lossy().into_owned();
+                assert_eq!(c.run_name(), stem);
+                c.model_config(vec![]).unwrap();
+                names.push(stem);
+            }
+        }
+        names.sort();
+        let mut want: Vec<String> = (1..=10).map(|i| format!("t{i}")).collect();
+        want.extend(["tiny", "libero_goal", "slotvla_h1", "slotvla_h8", "dense"].map(String::from));
+        want.sort();
+        assert_eq!(names, want);
+    }
+}

@@ -404,18 +404,20 @@ pub fn train(cfg: &Config, opts: &TrainOptions) -> Result<TrainSummary> {
             checkpoint::prune(&run, t.keep)?;
         }
     }
-    if state.step == t.steps && last_val_step != Some(state.step) && state.step > start_step {
-        if let Some(v) = validate(
+    let final_val = state.step == t.steps && last_val_step != Some(state.step);
+    if final_val
+        && state.step > start_step
+        && let Some(v) = validate(
             &model,
             &data,
             t.batch_size,
             t.val_batches,
             state.step,
             &device,
-        )? {
-            val_loss = Some(v.loss);
-            val_log.write(&v)?;
-        }
+        )?
+    {
+        val_loss = Some(v.loss);
+        val_log.write(&v)?;
     }
     bar.finish_and_clear();
     plot_run(&run)?;
