@@ -35,6 +35,9 @@ pub struct Record {
     /// Seconds since the run started (cumulative over resumes).
     #[serde(default)]
     pub time_s: f64,
+    /// Seconds this step spent reading and batching windows.
+    #[serde(default)]
+    pub data_s: f64,
 }
 
 impl Record {

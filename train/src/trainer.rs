@@ -110,6 +110,7 @@ fn record(step: u64, l: &Losses) -> Record {
         slot_recon: l.slot_recon.as_ref().map(scalar),
         grad_norm: 0.0,
         time_s: 0.0,
+        data_s: 0.0,
     }
 }
 
@@ -354,10 +355,13 @@ pub fn train(cfg: &Config, opts: &TrainOptions) -> Result<TrainSummary> {
     let mut last_val_step = None;
     let val_due = |step: u64| t.val_every > 0 && step.is_multiple_of(t.val_every);
     while state.step < end {
+        let data_started = Instant::now();
         let indices = state.sampler.next_batch(t.batch_size);
         let batch = data.batch(&data.train, &indices, &ad)?;
+        let data_s = data_started.elapsed().as_secs_f64();
         let (_, losses) = model.forward(&batch)?;
         let mut rec = record(state.step + 1, &losses);
+        rec.data_s = data_s;
         if !rec.loss.is_finite() {
             return Err(TrainError::NonFinite(state.step + 1));
         }
