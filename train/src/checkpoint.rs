@@ -278,3 +278,45 @@ pub fn prune(run_dir: &Path, keep: usize) -> Result<Vec<PathBuf>> {
     }
     Ok(removed)
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn fake(run: &Path, step: u64) {
+        let d = run.join(CHECKPOINTS).join(dir_name(step));
+        fs::create_dir_all(&d).unwrap();
+        fs::write(d.join("state.json"), "{}").unwrap();
+    }
+
+    #[test]
+    fn latest_first_then_newest_and_prune_keeps_the_newest() {
+        let run = tempfile::tempdir().unwrap();
+        let run = run.path();
+        assert!(candidates(run).unwrap().is_empty());
+        for s in [10, 20, 30] {
+            fake(run, s);
+        }
+        // Incomplete: no state.json (never renamed into place by `save`, but be safe).
+        fs::create_dir_all(run.join(CHECKPOINTS).join(dir_name(40))).unwrap();
+        fs::create_dir_all(run.join(CHECKPOINTS).join(".tmp-x")).unwrap();
+        let names = |v: Vec<PathBuf>| -> Vec<String> {
+            v.iter()
+                .map(|p| p.file_name().unwrap().to_string_lossy().into_owned())
+                .collect()
+        };
+        assert_eq!(
+            names(candidates(run).unwrap()),
+            ["step_000000030", "step_000000020", "step_000000010"]
+        );
+        fs::write(run.join(CHECKPOINTS).join(LATEST), "step_000000020\n").unwrap();
+        assert_eq!(names(candidates(run).unwrap())[0], "step_000000020");
+        clean_temporaries(run).unwrap();
+        assert!(!run.join(CHECKPOINTS).join(".tmp-x").exists());
+        // keep 1: the newest stays, and so does the one `latest` names.
+        prune(run, 1).unwrap();
+        let left: Vec<u64> = list(run).unwrap().iter().map(|x| x.0).collect();
+        assert_eq!(left, vec![20, 30]);
+        assert!(read_state(&run.join(CHECKPOINTS).join(dir_name(30))).is_err());
+    }
+}

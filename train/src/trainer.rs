@@ -231,14 +231,14 @@ pub fn train(cfg: &Config, opts: &TrainOptions) -> Result<TrainSummary> {
     let cfg = resolve(cfg, opts);
     let run = run_dir(&cfg, opts);
     let t = cfg.train.clone();
+    let device = backend::device(cfg.backend.kind)?;
+    let ad = device.clone().autodiff();
 
     ensure_dataset(&cfg)?;
     let index = data::DatasetIndex::load(&cfg.data.dir)?;
     let vocab = RunData::model_vocab(&index)?;
     let mcfg: ModelConfig = cfg.model_config(vocab).map_err(|m| config_error(&cfg, m))?;
     let data = RunData::open(&cfg, &mcfg)?;
-    let device = backend::device(cfg.backend.kind)?;
-    let ad = device.clone().autodiff();
 
     std::fs::create_dir_all(&run).map_err(|e| TrainError::io(&run, e))?;
     checkpoint::clean_temporaries(&run)?;
