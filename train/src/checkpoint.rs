@@ -36,8 +36,8 @@ pub struct TrainState {
     pub step: u64,
     /// Data sampler position.
     pub sampler: Sampler,
-    /// Seed of Burn's RNG (re-seeded with `rng_seed ^ step` on resume; the training forward
-    /// draws no random numbers after initialisation).
+    /// Seed of Burn's RNG; the trainer re-seeds it with `rng_seed ^ step` right after writing
+    /// a checkpoint and when resuming from one, so both runs see the same random stream.
     pub rng_seed: u64,
     /// Training seconds so far.
     pub elapsed_s: f64,

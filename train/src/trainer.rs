@@ -406,6 +406,9 @@ pub fn train(cfg: &Config, opts: &TrainOptions) -> Result<TrainSummary> {
                 &config_toml,
             )?);
             checkpoint::prune(&run, t.keep)?;
+            // Re-seed at every checkpoint as a resumed run does, so that random draws after
+            // it (none today: the forward is deterministic) match too.
+            ad.seed(state.rng_seed ^ state.step);
         }
     }
     let final_val = state.step == t.steps && last_val_step != Some(state.step);
