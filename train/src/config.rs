@@ -1,0 +1,478 @@
+//! Experiment configs: one TOML file per experiment with sections `[data]`, `[model]`, `[train]`,
+//! `[backend]` and `[eval]`. Every table denies unknown keys, so a typo is an error that names
+//! the key and the file, never a silent default.
+//!
+//! ```toml
+//! name = "t3"                       # run name: runs/<name>/ (default: the file stem)
+//! [data]
+//! dir = "datasets/t3"               # relative to the working directory
+//! generate = { task = "t3", episodes = 50, val = 5, seed = 0 }   # when `dir` is missing
+//! [model]
+//! variant = "e_slotssm"             # e_slotssm | e_slotssm_oracle | slotvla_h<N> | dense | dense_h<N>
+//! preset = "tiny"                   # tiny | full
+//! [model.overrides]                 # any field of model::ModelConfig, merged into the preset
+//! decoder = { layers = 3 }
+//! [train]
+//! steps = 20000
+//! [backend]
+//! kind = "flex"                     # flex | ndarray (feature `ndarray`) | wgpu (feature `wgpu`)
+//! [eval]
+//! tasks = ["t3"]
+//! seeds = [0, 1, 2]
+//! ```
+
+use std::path::{Path, PathBuf};
+
+use model::{ModelConfig, Variant};
+use serde::{Deserialize, Serialize};
+
+use crate::error::{Result, TrainError};
+
+/// A whole experiment.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Config {
+    /// Run name; the run directory is `runs/<name>/` (default: the config file's stem).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub name: Option<String>,
+    /// Dataset.
+    pub data: DataConfig,
+    /// Model variant, preset and overrides.
+    pub model: ModelSection,
+    /// Optimisation.
+    #[serde(default)]
+    pub train: TrainSection,
+    /// Compute backend.
+    #[serde(default)]
+    pub backend: BackendSection,
+    /// Evaluation settings (stored for the eval crate).
+    #[serde(default)]
+    pub eval: EvalSection,
+    /// The file this config was read from (for error messages; not serialised).
+    #[serde(skip)]
+    pub source: Option<PathBuf>,
+}
+
+/// `[data]`: where the episodes are and how windows are cut.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct DataConfig {
+    /// Dataset directory (`*.mcap` + `index.json`), relative to the working directory.
+    pub dir: PathBuf,
+    /// Generate the dataset through the simulator when `dir` is missing.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub generate: Option<GenerateSpec>,
+    /// Frames per training window T (default: 16 for the tiny preset, 32 for full).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub window: Option<usize>,
+    /// Seeded colour jitter + shift augmentation (LIBERO-Mem's pipeline).
+    #[serde(default = "yes")]
+    pub augment: bool,
+}
+
+fn yes() -> bool {
+    true
+}
+
+/// `[data].generate`: what `sim generate --task --episodes --val --seed --out` should produce.
+#[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct GenerateSpec {
+    /// Task id or alias (`t1` … `t10`, `libero_goal/<stem>`).
+    pub task: String,
+    /// Number of episodes.
+    pub episodes: usize,
+    /// Episodes held out for validation.
+    #[serde(default)]
+    pub val: usize,
+    /// Seed of the first episode.
+    #[serde(default)]
+    pub seed: u64,
+}
+
+/// Model size preset.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Preset {
+    /// model.md §0 tiny (CPU).
+    Tiny,
+    /// model.md §0 full (GPU).
+    Full,
+}
+
+/// `[model]`: variant name, preset and overrides of any `ModelConfig` field.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ModelSection {
+    /// Variant name (`e_slotssm`, `e_slotssm_oracle`, `slotvla_h<N>`, `dense`, `dense_h<N>`).
+    pub variant: String,
+    /// Size preset.
+    #[serde(default = "tiny")]
+    pub preset: Preset,
+    /// Fields of `model::ModelConfig` replacing the preset's (nested tables merge key by key).
+    #[serde(default, skip_serializing_if = "toml::Table::is_empty")]
+    pub overrides: toml::Table,
+}
+
+fn tiny() -> Preset {
+    Preset::Tiny
+}
+
+/// `[train.loss_weights]`: λ of every loss term (default: the preset's, model.md §0).
+#[derive(Clone, Debug, PartialEq, Default, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct LossWeights {
+    /// λ_act.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub action: Option<f64>,
+    /// λ_tc.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub contrastive: Option<f64>,
+    /// λ_win.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub window: Option<f64>,
+    /// λ_sa (0 also removes the slot decoder from the model).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub slot_recon: Option<f64>,
+}
+
+/// `[train]`: optimisation, schedule, checkpoints, validation.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct TrainSection {
+    /// Optimiser steps.
+    pub steps: u64,
+    /// Windows per batch.
+    pub batch_size: usize,
+    /// Peak learning rate (AdamW).
+    pub lr: f64,
+    /// Linear warm-up steps (from 0 to `lr`).
+    pub warmup_steps: u64,
+    /// Cosine decay ends at `lr · final_lr_fraction`.
+    pub final_lr_fraction: f64,
+    /// AdamW decoupled weight decay.
+    pub weight_decay: f64,
+    /// AdamW β₁.
+    pub beta1: f64,
+    /// AdamW β₂.
+    pub beta2: f64,
+    /// Global gradient-norm clip (0 = off).
+    pub grad_clip: f64,
+    /// Checkpoint every N steps (0 = only at the end).
+    pub checkpoint_every: u64,
+    /// Checkpoints kept (0 = all).
+    pub keep: usize,
+    /// Seed of the initialisation, sampler order and augmentation.
+    pub seed: u64,
+    /// Validation every N steps (0 = only at the end; skipped without a val split).
+    pub val_every: u64,
+    /// Batches per validation (0 = the whole val split).
+    pub val_batches: usize,
+    /// Loss weights.
+    pub loss_weights: LossWeights,
+}
+
+impl Default for TrainSection {
+    fn default() -> Self {
+        TrainSection {
+            steps: 20_000,
+            batch_size: 8,
+            lr: 3e-4,
+            warmup_steps: 500,
+            final_lr_fraction: 0.0,
+            weight_decay: 1e-2,
+            beta1: 0.9,
+            beta2: 0.999,
+            grad_clip: 1.0,
+            checkpoint_every: 1000,
+            keep: 3,
+            seed: 0,
+            val_every: 1000,
+            val_batches: 8,
+            loss_weights: LossWeights::default(),
+        }
+    }
+}
+
+/// Which Burn device trains.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum BackendKind {
+    /// Burn's pure-Rust CPU backend (always compiled in; the default).
+    #[default]
+    Flex,
+    /// burn-ndarray (cargo feature `ndarray`; deprecated upstream).
+    Ndarray,
+    /// wgpu (cargo feature `wgpu`).
+    Wgpu,
+}
+
+impl std::str::FromStr for BackendKind {
+    type Err = TrainError;
+    fn from_str(s: &str) -> Result<Self> {
+        match s {
+            "flex" => Ok(BackendKind::Flex),
+            "ndarray" => Ok(BackendKind::Ndarray),
+            "wgpu" => Ok(BackendKind::Wgpu),
+            _ => Err(TrainError::Usage(format!(
+                "unknown backend `{s}` (expected flex, ndarray or wgpu)"
+            ))),
+        }
+    }
+}
+
+/// `[backend]`.
+#[derive(Clone, Debug, PartialEq, Default, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct BackendSection {
+    /// Backend kind.
+    pub kind: BackendKind,
+}
+
+/// `[eval]`: read by the eval crate (`eval --run runs/<name>`).
+#[derive(Clone, Debug, PartialEq, Default, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct EvalSection {
+    /// Task ids or aliases to roll out.
+    pub tasks: Vec<String>,
+    /// Episode seeds per task.
+    pub seeds: Vec<u64>,
+}
+
+impl Config {
+    /// Reads and checks a config file; errors name the file and the offending key.
+    pub fn load(path: impl AsRef<Path>) -> Result<Config> {
+        let path = path.as_ref();
+        let text = std::fs::read_to_string(path).map_err(|e| TrainError::Config {
+            path: path.to_path_buf(),
+            message: format!("cannot read: {e}"),
+        })?;
+        let cfg = Config::parse(&text).map_err(|message| TrainError::Config {
+            path: path.to_path_buf(),
+            message,
+        })?;
+        let mut cfg = cfg;
+        cfg.source = Some(path.to_path_buf());
+        if cfg.name.is_none() {
+            cfg.name = path.file_stem().map(|s| s.to_string_lossy().into_owned());
+        }
+        Ok(cfg)
+    }
+
+    /// Parses config text; the error message names the key (and line) at fault.
+    pub fn parse(text: &str) -> std::result::Result<Config, String> {
+        let cfg: Config = toml::from_str(text).map_err(|e| describe_toml_error(text, &e))?;
+        cfg.check()?;
+        Ok(cfg)
+    }
+
+    /// Value checks that serde cannot express (the message names the key).
+    fn check(&self) -> std::result::Result<(), String> {
+        Variant::from_name(&self.model.variant).map_err(|e| format!("model.variant: {e}"))?;
+        let t = &self.train;
+        let bad = |k: &str, why: &str| Err(format!("train.{k}: {why}"));
+        if t.steps == 0 {
+            return bad("steps", "must be ≥ 1");
+        }
+        if t.batch_size == 0 {
+            return bad("batch_size", "must be ≥ 1");
+        }
+        if !(t.lr > 0.0 && t.lr.is_finite()) {
+            return bad("lr", "must be > 0");
+        }
+        if !(0.0..=1.0).contains(&t.final_lr_fraction) {
+            return bad("final_lr_fraction", "must be in [0, 1]");
+        }
+        if t.grad_clip < 0.0 || t.weight_decay < 0.0 {
+            return bad("grad_clip / weight_decay", "must be ≥ 0");
+        }
+        if self.data.window == Some(0) {
+            return Err("data.window: must be ≥ 1".into());
+        }
+        // Resolve the model once so that bad overrides fail at load time.
+        self.model_config(Vec::new())?;
+        Ok(())
+    }
+
+    /// The run name (set by [`Config::load`] from the file stem when absent).
+    pub fn run_name(&self) -> String {
+        self.name.clone().unwrap_or_else(|| "run".into())
+    }
+
+    /// Frames per training window T.
+    pub fn window_len(&self) -> usize {
+        self.data.window.unwrap_or(match self.model.preset {
+            Preset::Tiny => 16,
+            Preset::Full => 32,
+        })
+    }
+
+    /// The resolved model config: preset, then overrides, then loss weights, then `vocab`
+    /// (the dataset's words, without `<pad>`/`<unk>`).
+    pub fn model_config(&self, vocab: Vec<String>) -> std::result::Result<ModelConfig, String> {
+        let variant =
+            Variant::from_name(&self.model.variant).map_err(|e| format!("model.variant: {e}"))?;
+        let preset = match self.model.preset {
+            Preset::Tiny => ModelConfig::tiny(variant),
+            Preset::Full => ModelConfig::full(variant),
+        };
+        let mut value = toml::Table::try_from(&preset).map_err(|e| e.to_string())?;
+        if self.model.overrides.contains_key("variant") {
+            return Err("model.overrides.variant: set `model.variant` instead".into());
+        }
+        if let Some(toml::Value::Table(t)) = self.model.overrides.get("text")
+            && t.contains_key("vocab")
+        {
+            return Err(
+                "model.overrides.text.vocab: the vocabulary comes from the dataset index".into(),
+            );
+        }
+        merge(&mut value, &self.model.overrides, "model.overrides")?;
+        let mut cfg: ModelConfig = value
+            .try_into()
+            .map_err(|e: toml::de::Error| format!("model.overrides: {}", e.message()))?;
+        let w = &self.train.loss_weights;
+        if let Some(v) = w.action {
+            cfg.loss.action = v;
+        }
+        if let Some(v) = w.contrastive {
+            cfg.loss.contrastive = v;
+        }
+        if let Some(v) = w.window {
+            cfg.loss.window = v;
+        }
+        if let Some(v) = w.slot_recon {
+            cfg.loss.slot_recon = v;
+        }
+        cfg.text.vocab = vocab;
+        cfg.validate().map_err(|e| format!("[model]: {e}"))?;
+        Ok(cfg)
+    }
+
+    /// The config as TOML (what `runs/<name>/config.toml` holds).
+    pub fn to_toml(&self) -> String {
+        toml::to_string_pretty(self).expect("a config always serialises")
+    }
+}
+
+/// Deep-merges `over` into `base`; a key that `base` lacks is an error naming its path.
+fn merge(base: &mut toml::Table, over: &toml::Table, at: &str) -> std::result::Result<(), String> {
+    for (k, v) in over {
+        let path = format!("{at}.{k}");
+        match (base.get_mut(k), v) {
+            (None, _) => {
+                let known: Vec<&str> = base.keys().map(String::as_str).collect();
+                return Err(format!(
+                    "unknown key `{path}` (expected one of: {})",
+                    known.join(", ")
+                ));
+            }
+            (Some(toml::Value::Table(b)), toml::Value::Table(o)) => merge(b, o, &path)?,
+            (Some(slot), v) => *slot = v.clone(),
+        }
+    }
+    Ok(())
+}
+
+/// One line: `line L, column C: <message>` (the message names the unknown or bad key).
+fn describe_toml_error(text: &str, e: &toml::de::Error) -> String {
+    let msg = e.message().trim().to_string();
+    match e.span() {
+        Some(span) => {
+            let before = &text[..span.start.min(text.len())];
+            let line = before.matches('\n').count() + 1;
+            let col = before.len() - before.rfind('\n').map(|i| i + 1).unwrap_or(0) + 1;
+            let key = text[span.clone()].trim();
+            if key.is_empty() || key.len() > 60 {
+                format!("line {line}, column {col}: {msg}")
+            } else {
+                format!("line {line}, column {col} (`{key}`): {msg}")
+            }
+        }
+        None => msg,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const MIN: &str = r#"
+[data]
+dir = "d"
+[model]
+variant = "e_slotssm"
+"#;
+
+    #[test]
+    fn minimal_config_gets_defaults() {
+        let c = Config::parse(MIN).unwrap();
+        assert_eq!(c.train, TrainSection::default());
+        assert_eq!(c.backend.kind, BackendKind::Flex);
+        assert_eq!(c.window_len(), 16);
+        let m = c.model_config(vec!["bowl".into()]).unwrap();
+        assert_eq!(m, {
+            let mut t = ModelConfig::tiny(Variant::from_name("e_slotssm").unwrap());
+            t.text.vocab = vec!["bowl".into()];
+            t
+        });
+        // Round trip through the resolved TOML.
+        assert_eq!(Config::parse(&c.to_toml()).unwrap(), c);
+    }
+
+    #[test]
+    fn unknown_keys_are_named() {
+        let e = Config::parse(&format!("{MIN}[train]\nlrr = 1.0\n")).unwrap_err();
+        assert!(e.contains("lrr") && e.contains("line"), "{e}");
+        let e =
+            Config::parse(&format!("{MIN}[model.overrides.encoder]\nchanels = [1]\n")).unwrap_err();
+        assert!(e.contains("model.overrides.encoder.chanels"), "{e}");
+        let e = Config::parse(&MIN.replace("e_slotssm", "slotssm")).unwrap_err();
+        assert!(e.contains("model.variant"), "{e}");
+        let e = Config::parse(&format!("{MIN}[backend]\nkind = \"cuda\"\n")).unwrap_err();
+        assert!(e.contains("cuda"), "{e}");
+    }
+
+    #[test]
+    fn overrides_and_loss_weights_apply() {
+        let c = Config::parse(&format!(
+            "{MIN}[model.overrides]\nimage_size = [32, 32]\ndecoder = {{ layers = 1 }}\n[train.loss_weights]\nslot_recon = 0.0\n"
+        ))
+        .unwrap();
+        let m = c.model_config(vec![]).unwrap();
+        assert_eq!(m.image_size, [32, 32]);
+        assert_eq!(m.decoder.layers, 1);
+        assert_eq!(m.decoder.width, 128);
+        assert_eq!(m.loss.slot_recon, 0.0);
+        let e =
+            Config::parse(&format!("{MIN}[model.overrides]\nimage_size = \"big\"\n")).unwrap_err();
+        assert!(e.contains("model.overrides"), "{e}");
+    }
+}
+
+#[cfg(test)]
+mod shipped {
+    use super::*;
+
+    /// Every config in `configs/` loads, resolves its model and names its run after the file.
+    #[test]
+    fn shipped_configs_are_valid() {
+        let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../configs");
+        let mut names = vec![];
+        for e in std::fs::read_dir(&dir).unwrap() {
+            let p = e.unwrap().path();
+            if p.extension().is_some_and(|x| x == "toml") {
+                let c = Config::load(&p).unwrap_or_else(|e| panic!("{e}"));
+                let stem = p.file_stem().unwrap().to_string_lossy().into_owned();
+                assert_eq!(c.run_name(), stem);
+                c.model_config(vec![]).unwrap();
+                names.push(stem);
+            }
+        }
+        names.sort();
+        let mut want: Vec<String> = (1..=10).map(|i| format!("t{i}")).collect();
+        want.extend(["tiny", "libero_goal", "slotvla_h1", "slotvla_h8", "dense"].map(String::from));
+        want.sort();
+        assert_eq!(names, want);
+    }
+}

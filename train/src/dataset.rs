@@ -1,0 +1,245 @@
+//! The data side of a run: make sure the dataset exists (generating it when the config asks),
+//! open the train/val windows, draw batches in a seeded order and turn them into the model's
+//! [`model::WindowBatch`].
+
+use std::path::Path;
+
+use burn::data::dataloader::batcher::Batcher;
+use burn::prelude::*;
+use data::burn_adapter::WindowBatcher;
+use data::{DatasetIndex, Split, WindowConfig, WindowDataset};
+use rand::SeedableRng;
+use rand::seq::SliceRandom;
+use rand_chacha::ChaCha8Rng;
+
+use crate::config::{Config, GenerateSpec};
+use crate::error::{Result, TrainError};
+
+/// Objects per frame given to the batcher (the current variants do not read boxes).
+const MAX_OBJECTS: usize = 8;
+
+/// Makes sure `[data].dir` holds a dataset: present → nothing to do; missing with
+/// `[data].generate` → [`generate_dataset`]; missing without → [`TrainError::DatasetMissing`].
+pub fn ensure_dataset(cfg: &Config) -> Result<()> {
+    let dir = &cfg.data.dir;
+    if dir.join(data::index::INDEX_FILE).is_file() {
+        return Ok(());
+    }
+    match &cfg.data.generate {
+        Some(spec) => generate_dataset(spec, dir),
+        None => Err(TrainError::DatasetMissing {
+            dir: dir.clone(),
+            hint: "no index.json there and `[data].generate` is not set; record episodes with \
+                   `sim generate` and index them with `data stats DIR`"
+                .into(),
+        }),
+    }
+}
+
+/// Generates `spec` into `dir` through the simulator. The one place to wire `sim`'s generation
+/// API in once it lands on main; until then a missing dataset is a clear error (exit 2) that
+/// says which command makes it.
+pub fn generate_dataset(spec: &GenerateSpec, dir: &Path) -> Result<()> {
+    Err(TrainError::DatasetMissing {
+        dir: dir.to_path_buf(),
+        hint: format!(
+            "generation through the simulator is not available in this build yet; run \
+             `sim generate --task {} --episodes {} --val {} --seed {} --out {}`",
+            spec.task,
+            spec.episodes,
+            spec.val,
+            spec.seed,
+            dir.display()
+        ),
+    })
+}
+
+/// Train and validation windows of a dataset, with the batcher.
+pub struct RunData {
+    /// The dataset index.
+    pub index: DatasetIndex,
+    /// Training windows.
+    pub train: WindowDataset,
+    /// Validation windows (None when the split is empty).
+    pub val: Option<WindowDataset>,
+    /// Stacks samples into tensors.
+    pub batcher: WindowBatcher,
+    /// Whether the model reads the per-frame subgoal text (oracle variant).
+    pub subgoals: bool,
+}
+
+impl RunData {
+    /// Opens `[data].dir` for a model of `model` (image size, text length).
+    pub fn open(cfg: &Config, model: &model::ModelConfig) -> Result<Self> {
+        let dir = &cfg.data.dir;
+        let index = DatasetIndex::load(dir)?;
+        let [h, w] = model.image_size;
+        if h != w {
+            return Err(TrainError::Usage(format!(
+                "model image_size {:?}: the dataset produces square frames",
+                model.image_size
+            )));
+        }
+        let win = WindowConfig {
+            past: cfg.window_len() - 1,
+            future: 0,
+            chunk: model.decoder.horizon,
+            image_size: h as u32,
+            wrist: false,
+            augment: cfg.data.augment.then(data::Augment::default),
+            seed: cfg.train.seed,
+        };
+        let train = WindowDataset::from_index(dir, &index, Split::Train, win.clone())?;
+        if train.is_empty() {
+            return Err(TrainError::Usage(format!(
+                "dataset {}: the train split is empty",
+                dir.display()
+            )));
+        }
+        let val_win = WindowConfig {
+            augment: None,
+            ..win
+        };
+        let val = if index.split(Split::Val).is_empty() {
+            None
+        } else {
+            Some(WindowDataset::from_index(dir, &index, Split::Val, val_win)?)
+        };
+        let batcher = WindowBatcher::new(index.vocab(), model.text.max_len, MAX_OBJECTS);
+        Ok(RunData {
+            index,
+            train,
+            val,
+            batcher,
+            subgoals: matches!(
+                model.variant,
+                model::Variant::ESlotSsm {
+                    oracle_subgoal: true
+                }
+            ),
+        })
+    }
+
+    /// The dataset's words in the model's id order (`<pad>` and `<unk>` are implicit there).
+    pub fn model_vocab(index: &DatasetIndex) -> Result<Vec<String>> {
+        let v = &index.vocab;
+        if v.len() < 2 || v[0] != "<pad>" || v[1] != "<unk>" {
+            return Err(TrainError::Other(
+                "index.json vocab must start with <pad>, <unk>".into(),
+            ));
+        }
+        Ok(v[2..].to_vec())
+    }
+
+    /// Samples `indices` of `ds` (augmentation seeded with `epoch`) as a model batch on `device`.
+    pub fn batch(
+        &self,
+        ds: &WindowDataset,
+        indices: &[(usize, u64)],
+        device: &Device,
+    ) -> Result<model::WindowBatch> {
+        use rayon::prelude::*;
+        let samples = indices
+            .par_iter()
+            .map(|&(i, epoch)| ds.get_with_epoch(i, epoch))
+            .collect::<data::Result<Vec<_>>>()?;
+        let b = self.batcher.batch(samples, device);
+        let [bs, t] = b.frame_mask.dims();
+        let [_, _, ha, a] = b.actions.dims();
+        let frame = b.frame_mask.float();
+        let action_mask = b
+            .action_mask
+            .float()
+            .mul(frame.clone().reshape([bs, t, 1]))
+            .reshape([bs, t, ha, 1])
+            .repeat_dim(3, a);
+        let subgoal = self.subgoals.then(|| {
+            let [_, _, l] = b.subgoal_ids.dims();
+            b.subgoal_ids.reshape([bs, t, 1, l])
+        });
+        Ok(model::WindowBatch {
+            images: b.images,
+            actions: b.actions,
+            frame_mask: frame,
+            action_mask: Some(action_mask),
+            instruction: b.instruction_ids,
+            subgoal,
+        })
+    }
+}
+
+/// Seeded sampling order: sample positions form one endless stream of epochs, each a fresh
+/// ChaCha8 permutation seeded by (seed, epoch). The state is one counter, so a resumed run
+/// draws exactly the batches the uninterrupted run would have drawn.
+#[derive(Clone, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+pub struct Sampler {
+    /// Seed of the permutations.
+    pub seed: u64,
+    /// Samples per epoch.
+    pub len: usize,
+    /// Samples drawn so far.
+    pub drawn: u64,
+    #[serde(skip)]
+    cache: Option<(u64, Vec<usize>)>,
+}
+
+impl Sampler {
+    /// A sampler over `len` samples.
+    pub fn new(seed: u64, len: usize) -> Self {
+        Sampler {
+            seed,
+            len,
+            drawn: 0,
+            cache: None,
+        }
+    }
+
+    /// Current epoch.
+    pub fn epoch(&self) -> u64 {
+        self.drawn / self.len as u64
+    }
+
+    fn permutation(&mut self, epoch: u64) -> &[usize] {
+        if self.cache.as_ref().map(|c| c.0) != Some(epoch) {
+            let mut p: Vec<usize> = (0..self.len).collect();
+            let seed = self.seed ^ epoch.wrapping_mul(0x9e37_79b9_7f4a_7c15);
+            p.shuffle(&mut ChaCha8Rng::seed_from_u64(seed));
+            self.cache = Some((epoch, p));
+        }
+        &self.cache.as_ref().expect("just filled").1
+    }
+
+    /// The next `n` (sample index, epoch) pairs.
+    pub fn next_batch(&mut self, n: usize) -> Vec<(usize, u64)> {
+        (0..n)
+            .map(|_| {
+                let epoch = self.epoch();
+                let pos = (self.drawn % self.len as u64) as usize;
+                let i = self.permutation(epoch)[pos];
+                self.drawn += 1;
+                (i, epoch)
+            })
+            .collect()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn sampler_visits_every_sample_once_per_epoch_and_resumes_exactly() {
+        let mut s = Sampler::new(7, 10);
+        let first: Vec<_> = s.next_batch(10);
+        let mut seen: Vec<usize> = first.iter().map(|x| x.0).collect();
+        seen.sort();
+        assert_eq!(seen, (0..10).collect::<Vec<_>>());
+        assert!(first.iter().all(|x| x.1 == 0));
+        let mut a = Sampler::new(7, 10);
+        a.next_batch(13);
+        let json = serde_json::to_string(&a).unwrap();
+        let mut b: Sampler = serde_json::from_str(&json).unwrap();
+        assert_eq!(a.next_batch(9), b.next_batch(9));
+        assert_ne!(Sampler::new(8, 10).next_batch(10), first);
+    }
+}

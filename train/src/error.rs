@@ -1,0 +1,91 @@
+//! Errors of the train crate; [`TrainError::exit_code`] maps them to the binary's exit status.
+
+use std::path::PathBuf;
+
+use thiserror::Error;
+
+/// Everything that can stop a training run.
+#[derive(Debug, Error)]
+pub enum TrainError {
+    /// The config file is unreadable or invalid (the message names the key).
+    #[error("config {}: {message}", path.display())]
+    Config {
+        /// The config file.
+        path: PathBuf,
+        /// What is wrong, naming the key.
+        message: String,
+    },
+    /// Bad command-line arguments or option values.
+    #[error("{0}")]
+    Usage(String),
+    /// The dataset directory is missing and cannot be generated.
+    #[error("dataset missing: {} ({hint})", dir.display())]
+    DatasetMissing {
+        /// The configured dataset directory.
+        dir: PathBuf,
+        /// How to make it.
+        hint: String,
+    },
+    /// A backend that this binary was built without.
+    #[error("backend `{name}` is not compiled in (rebuild with `--features train/{feature}`)")]
+    BackendUnavailable {
+        /// Backend name.
+        name: String,
+        /// The cargo feature that enables it.
+        feature: String,
+    },
+    /// A checkpoint of another model (variant, sizes, vocabulary) or of a broken format.
+    #[error("incompatible checkpoint {}: {message}", path.display())]
+    IncompatibleCheckpoint {
+        /// The checkpoint directory.
+        path: PathBuf,
+        /// What differs.
+        message: String,
+    },
+    /// Dataset reading failed.
+    #[error(transparent)]
+    Data(#[from] data::DataError),
+    /// Model building or forward failed.
+    #[error(transparent)]
+    Model(#[from] model::ModelError),
+    /// File-system error on a path.
+    #[error("{}: {source}", path.display())]
+    Io {
+        /// The path.
+        path: PathBuf,
+        /// The error.
+        source: std::io::Error,
+    },
+    /// A non-finite loss (diverged training).
+    #[error("loss is not finite at step {0}")]
+    NonFinite(u64),
+    /// Anything else (record files, plots).
+    #[error("{0}")]
+    Other(String),
+}
+
+impl TrainError {
+    /// `Io` error with its path.
+    pub fn io(path: impl Into<PathBuf>, source: std::io::Error) -> Self {
+        TrainError::Io {
+            path: path.into(),
+            source,
+        }
+    }
+
+    /// Exit status of the binary: 2 for bad input (config, arguments, missing dataset,
+    /// unavailable backend, incompatible checkpoint), 1 otherwise.
+    pub fn exit_code(&self) -> i32 {
+        match self {
+            TrainError::Config { .. }
+            | TrainError::Usage(_)
+            | TrainError::DatasetMissing { .. }
+            | TrainError::BackendUnavailable { .. }
+            | TrainError::IncompatibleCheckpoint { .. } => 2,
+            _ => 1,
+        }
+    }
+}
+
+/// Result alias of this crate.
+pub type Result<T> = std::result::Result<T, TrainError>;

@@ -1,0 +1,446 @@
+//! The training loop.
+//!
+//! Our own loop on Burn's optimisers rather than burn-train's `Learner`: the Learner owns the
+//! data loader (its worker threads and shuffling are not resumable mid-epoch from our sampler
+//! state), clips gradients per tensor, and checkpoints through its own recorder layout; we need
+//! a seeded sampler whose position is part of the checkpoint, global-norm clipping, atomic
+//! checkpoints with a `latest` pointer, and `runs/<name>/` in LeRobot's layout. The loop is
+//! short: sample → forward → backward → clip → AdamW step with the scheduled learning rate.
+//!
+//! Determinism: Burn's RNG is seeded with `[train].seed` before the model is built (the only
+//! random draws: initialisation), the sampler's order is a function of (seed, epoch), and
+//! augmentation of (seed, epoch, sample), so the same config gives the same weights, and a run
+//! resumed from a checkpoint ends bit for bit where the uninterrupted run ends.
+
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use burn::optim::{AdamWConfig, GradientsParams, ModuleOptimizer};
+use burn::prelude::*;
+use indicatif::{ProgressBar, ProgressStyle};
+use model::{Losses, ModelConfig, PolicyModel};
+use serde::{Deserialize, Serialize};
+
+use crate::backend;
+use crate::checkpoint::{self, STATE_FORMAT, TrainState};
+use crate::clip::clip_global_norm;
+use crate::config::{BackendKind, Config};
+use crate::dataset::{RunData, Sampler, ensure_dataset};
+use crate::error::{Result, TrainError};
+use crate::metrics::{self, JsonlWriter, Record};
+use crate::plot;
+use crate::schedule::WarmupCosine;
+
+/// Command-line choices that override or complement the config.
+#[derive(Clone, Debug, Default)]
+pub struct TrainOptions {
+    /// Require a checkpoint to resume from (without it, resuming is still automatic when the
+    /// run directory has checkpoints).
+    pub resume: bool,
+    /// Overrides `[train].keep`.
+    pub keep: Option<usize>,
+    /// Overrides `[train].steps`.
+    pub steps: Option<u64>,
+    /// Run directory (default `runs/<name>`).
+    pub run_dir: Option<PathBuf>,
+    /// Overrides `[backend].kind`.
+    pub backend: Option<BackendKind>,
+    /// Show the progress bar.
+    pub progress: bool,
+    /// Stop (after checkpointing) once this many steps are done, as if killed there; the
+    /// schedule still spans `steps` (used to test resuming).
+    pub stop_at: Option<u64>,
+}
+
+/// What a run did.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub struct TrainSummary {
+    /// The run directory.
+    pub run_dir: PathBuf,
+    /// Step the run started from (0, or the checkpoint it resumed).
+    pub start_step: u64,
+    /// Steps done at the end.
+    pub step: u64,
+    /// Total loss of the first step of the whole run (from the metrics), if known.
+    pub first_loss: Option<f64>,
+    /// Mean total loss over the last steps of this invocation.
+    pub final_loss: Option<f64>,
+    /// Last validation loss.
+    pub val_loss: Option<f64>,
+    /// Optimiser steps per second in this invocation.
+    pub steps_per_s: f64,
+    /// The last checkpoint written or resumed.
+    pub checkpoint: Option<PathBuf>,
+}
+
+/// The config with the command-line overrides applied, as saved in the run directory.
+pub fn resolve(cfg: &Config, opts: &TrainOptions) -> Config {
+    let mut c = cfg.clone();
+    if let Some(s) = opts.steps {
+        c.train.steps = s;
+    }
+    if let Some(k) = opts.keep {
+        c.train.keep = k;
+    }
+    if let Some(b) = opts.backend {
+        c.backend.kind = b;
+    }
+    c
+}
+
+/// The run directory of a config (`--run-dir` or `runs/<name>`).
+pub fn run_dir(cfg: &Config, opts: &TrainOptions) -> PathBuf {
+    opts.run_dir
+        .clone()
+        .unwrap_or_else(|| Path::new("runs").join(cfg.run_name()))
+}
+
+fn scalar(x: &Tensor<1>) -> f64 {
+    x.clone().into_scalar::<f32>() as f64
+}
+
+fn record(step: u64, l: &Losses) -> Record {
+    Record {
+        step,
+        lr: 0.0,
+        loss: scalar(&l.total),
+        action: scalar(&l.action),
+        contrastive: l.contrastive.as_ref().map(scalar),
+        window: l.window.as_ref().map(scalar),
+        slot_recon: l.slot_recon.as_ref().map(scalar),
+        grad_norm: 0.0,
+        time_s: 0.0,
+        data_s: 0.0,
+    }
+}
+
+fn config_error(cfg: &Config, message: String) -> TrainError {
+    TrainError::Config {
+        path: cfg
+            .source
+            .clone()
+            .unwrap_or_else(|| PathBuf::from("<config>")),
+        message,
+    }
+}
+
+/// Mean losses over the validation split (evenly spread windows, fixed order, no augmentation).
+pub fn validate(
+    model: &PolicyModel,
+    data: &RunData,
+    batch_size: usize,
+    max_batches: usize,
+    step: u64,
+    device: &Device,
+) -> Result<Option<Record>> {
+    let Some(val) = &data.val else {
+        return Ok(None);
+    };
+    let n = if max_batches == 0 {
+        val.len()
+    } else {
+        (max_batches * batch_size).min(val.len())
+    };
+    let indices: Vec<(usize, u64)> = (0..n).map(|k| (k * val.len() / n, 0)).collect();
+    let model = model.valid();
+    let mut sum: Option<Record> = None;
+    let mut batches = 0.0;
+    for chunk in indices.chunks(batch_size) {
+        let batch = data.batch(val, chunk, device)?;
+        let (_, losses) = model.forward(&batch)?;
+        let r = record(step, &losses);
+        let w = chunk.len() as f64;
+        let add = |a: Option<f64>, b: Option<f64>| match (a, b) {
+            (Some(a), Some(b)) => Some(a + w * b),
+            _ => None,
+        };
+        sum = Some(match sum {
+            None => Record {
+                loss: w * r.loss,
+                action: w * r.action,
+                contrastive: r.contrastive.map(|x| w * x),
+                window: r.window.map(|x| w * x),
+                slot_recon: r.slot_recon.map(|x| w * x),
+                ..r
+            },
+            Some(s) => Record {
+                loss: s.loss + w * r.loss,
+                action: s.action + w * r.action,
+                contrastive: add(s.contrastive, r.contrastive),
+                window: add(s.window, r.window),
+                slot_recon: add(s.slot_recon, r.slot_recon),
+                ..s
+            },
+        });
+        batches += w;
+    }
+    Ok(sum.map(|s| Record {
+        loss: s.loss / batches,
+        action: s.action / batches,
+        contrastive: s.contrastive.map(|x| x / batches),
+        window: s.window.map(|x| x / batches),
+        slot_recon: s.slot_recon.map(|x| x / batches),
+        ..s
+    }))
+}
+
+fn new_optimizer(cfg: &Config) -> ModuleOptimizer {
+    let t = &cfg.train;
+    AdamWConfig::new()
+        .with_beta_1(t.beta1 as f32)
+        .with_beta_2(t.beta2 as f32)
+        .with_weight_decay(t.weight_decay as f32)
+        .init()
+}
+
+/// Draws the loss curves of a run directory into `RUN/plots/loss_<term>.png`.
+pub fn plot_run(run_dir: &Path) -> Result<Vec<PathBuf>> {
+    let train = metrics::read(&run_dir.join("metrics.jsonl"))?;
+    let val = metrics::read(&run_dir.join("val.jsonl"))?;
+    let dir = run_dir.join("plots");
+    std::fs::create_dir_all(&dir).map_err(|e| TrainError::io(&dir, e))?;
+    let mut out = vec![];
+    let Some(first) = train.first() else {
+        return Ok(out);
+    };
+    for (name, _) in first.terms() {
+        let pick = |rs: &[Record]| -> Vec<(u64, f64)> {
+            rs.iter()
+                .filter_map(|r| {
+                    r.terms()
+                        .into_iter()
+                        .find(|t| t.0 == name)
+                        .map(|t| (r.step, t.1))
+                })
+                .collect()
+        };
+        let p = dir.join(format!("loss_{name}.png"));
+        plot::loss_curve(&p, name, &pick(&train), &pick(&val))?;
+        out.push(p);
+    }
+    Ok(out)
+}
+
+fn write_file(path: &Path, text: &str) -> Result<()> {
+    data::index::write_atomic(path, text.as_bytes()).map_err(TrainError::from)
+}
+
+/// Trains `cfg` (see the module docs); resumes automatically from the run directory's newest
+/// complete checkpoint.
+pub fn train(cfg: &Config, opts: &TrainOptions) -> Result<TrainSummary> {
+    let cfg = resolve(cfg, opts);
+    let run = run_dir(&cfg, opts);
+    let t = cfg.train.clone();
+    let device = backend::device(cfg.backend.kind)?;
+    let ad = device.clone().autodiff();
+
+    ensure_dataset(&cfg)?;
+    let index = data::DatasetIndex::load(&cfg.data.dir)?;
+    let vocab = RunData::model_vocab(&index)?;
+    let mcfg: ModelConfig = cfg.model_config(vocab).map_err(|m| config_error(&cfg, m))?;
+    let data = RunData::open(&cfg, &mcfg)?;
+
+    std::fs::create_dir_all(&run).map_err(|e| TrainError::io(&run, e))?;
+    checkpoint::clean_temporaries(&run)?;
+    let config_toml = cfg.to_toml();
+
+    // Fresh model and optimiser, or the newest loadable checkpoint.
+    let mut candidates = checkpoint::candidates(&run)?;
+    if opts.resume && candidates.is_empty() {
+        return Err(TrainError::Usage(format!(
+            "--resume: no checkpoint in {}",
+            run.join(checkpoint::CHECKPOINTS).display()
+        )));
+    }
+    let mut loaded = None;
+    let mut last_err = None;
+    for dir in candidates.drain(..) {
+        match checkpoint::load(&dir, &mcfg, new_optimizer(&cfg), &ad) {
+            Ok(l) => {
+                loaded = Some(l);
+                break;
+            }
+            // Another model: never fall back to an older checkpoint of it silently.
+            Err(e @ TrainError::IncompatibleCheckpoint { .. })
+                if checkpoint::read_state(&dir).is_ok() =>
+            {
+                return Err(e);
+            }
+            Err(e) => {
+                eprintln!(
+                    "warning: skipping unreadable checkpoint {}: {e}",
+                    dir.display()
+                );
+                last_err = Some(e);
+            }
+        }
+    }
+    if loaded.is_none()
+        && let Some(e) = last_err
+    {
+        return Err(e);
+    }
+    let (mut model, mut optim, mut state, resumed_from) = match loaded {
+        Some(l) => {
+            ad.seed(l.state.rng_seed ^ l.state.step);
+            if l.state.sampler.len != data.train.len() {
+                return Err(TrainError::IncompatibleCheckpoint {
+                    path: l.dir,
+                    message: format!(
+                        "its sampler covers {} training windows, the dataset now has {}",
+                        l.state.sampler.len,
+                        data.train.len()
+                    ),
+                });
+            }
+            (l.model, l.optim, l.state, Some(l.dir))
+        }
+        None => {
+            ad.seed(t.seed);
+            let model = PolicyModel::new(&mcfg, &ad)?;
+            let state = TrainState {
+                format: STATE_FORMAT.into(),
+                step: 0,
+                sampler: Sampler::new(t.seed, data.train.len()),
+                rng_seed: t.seed,
+                elapsed_s: 0.0,
+                model: mcfg.clone(),
+            };
+            (model, new_optimizer(&cfg), state, None)
+        }
+    };
+    let start_step = state.step;
+
+    // LeRobot layout: the resolved config next to the checkpoints; what eval needs.
+    write_file(&run.join("config.toml"), &config_toml)?;
+    write_file(
+        &run.join("model.json"),
+        &serde_json::to_string_pretty(&mcfg).expect("serialises"),
+    )?;
+    let norm = data.train.action_norm();
+    write_file(
+        &run.join("action_stats.json"),
+        &serde_json::json!({"q01": norm.q01, "q99": norm.q99, "mask": norm.mask}).to_string(),
+    )?;
+    let mut train_log = JsonlWriter::open(&run.join("metrics.jsonl"), state.step)?;
+    let mut val_log = JsonlWriter::open(&run.join("val.jsonl"), state.step)?;
+
+    let sched = WarmupCosine {
+        lr: t.lr,
+        warmup: t.warmup_steps,
+        total: t.steps,
+        final_fraction: t.final_lr_fraction,
+    };
+    let end = opts.stop_at.map_or(t.steps, |s| s.min(t.steps));
+    let bar = if opts.progress {
+        let b = ProgressBar::new(t.steps);
+        b.set_style(
+            ProgressStyle::with_template(
+                "{spinner} [{elapsed_precise}] {bar:30} {pos}/{len} {msg} ({per_sec}, ETA {eta})",
+            )
+            .expect("valid template"),
+        );
+        b.set_position(state.step);
+        b.reset_eta();
+        b
+    } else {
+        ProgressBar::hidden()
+    };
+
+    let started = Instant::now();
+    let elapsed_before = state.elapsed_s;
+    let mut last_ckpt = resumed_from.clone();
+    let mut recent: Vec<f64> = vec![];
+    let mut val_loss = None;
+    let mut last_val_step = None;
+    let val_due = |step: u64| t.val_every > 0 && step.is_multiple_of(t.val_every);
+    while state.step < end {
+        let data_started = Instant::now();
+        let indices = state.sampler.next_batch(t.batch_size);
+        let batch = data.batch(&data.train, &indices, &ad)?;
+        let data_s = data_started.elapsed().as_secs_f64();
+        let (_, losses) = model.forward(&batch)?;
+        let mut rec = record(state.step + 1, &losses);
+        rec.data_s = data_s;
+        if !rec.loss.is_finite() {
+            return Err(TrainError::NonFinite(state.step + 1));
+        }
+        let mut grads = GradientsParams::from_grads(losses.total.backward(), &model);
+        rec.grad_norm = clip_global_norm(&model, &mut grads, t.grad_clip);
+        rec.lr = sched.lr(state.step);
+        model = optim.step(rec.lr, model, grads);
+        state.step += 1;
+        state.elapsed_s = elapsed_before + started.elapsed().as_secs_f64();
+        rec.time_s = state.elapsed_s;
+        train_log.write(&rec)?;
+        recent.push(rec.loss);
+        if recent.len() > 20 {
+            recent.remove(0);
+        }
+        bar.set_position(state.step);
+        bar.set_message(format!("loss {:.4}", rec.loss));
+
+        if val_due(state.step) {
+            if let Some(v) = validate(
+                &model,
+                &data,
+                t.batch_size,
+                t.val_batches,
+                state.step,
+                &device,
+            )? {
+                val_loss = Some(v.loss);
+                val_log.write(&v)?;
+                bar.println(format!("step {}: val loss {:.4}", state.step, v.loss));
+            }
+            last_val_step = Some(state.step);
+        }
+        let ckpt_due = (t.checkpoint_every > 0 && state.step.is_multiple_of(t.checkpoint_every))
+            || state.step == end;
+        if ckpt_due {
+            last_ckpt = Some(checkpoint::save(
+                &run,
+                &model,
+                &optim,
+                &state,
+                &config_toml,
+            )?);
+            checkpoint::prune(&run, t.keep)?;
+            // Re-seed at every checkpoint as a resumed run does, so that random draws after
+            // it (none today: the forward is deterministic) match too.
+            ad.seed(state.rng_seed ^ state.step);
+        }
+    }
+    let final_val = state.step == t.steps && last_val_step != Some(state.step);
+    if final_val
+        && state.step > start_step
+        && let Some(v) = validate(
+            &model,
+            &data,
+            t.batch_size,
+            t.val_batches,
+            state.step,
+            &device,
+        )?
+    {
+        val_loss = Some(v.loss);
+        val_log.write(&v)?;
+    }
+    bar.finish_and_clear();
+    plot_run(&run)?;
+    let done = state.step - start_step;
+    let secs = started.elapsed().as_secs_f64();
+    let first_loss = metrics::read(&run.join("metrics.jsonl"))?
+        .first()
+        .map(|r| r.loss);
+    Ok(TrainSummary {
+        run_dir: run,
+        start_step,
+        step: state.step,
+        first_loss,
+        final_loss: (!recent.is_empty()).then(|| recent.iter().sum::<f64>() / recent.len() as f64),
+        val_loss,
+        steps_per_s: if secs > 0.0 { done as f64 / secs } else { 0.0 },
+        checkpoint: last_ckpt,
+    })
+}

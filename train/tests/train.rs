@@ -1,0 +1,320 @@
+//! End-to-end tests of the trainer on synthetic episodes (`data::synth`) with the CI config
+//! `configs/tiny.toml`: the loss halves, a killed run resumes to the same weights as an
+//! uninterrupted one, and bad input is a clear error with exit status 2.
+
+mod common;
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+use std::sync::{Mutex, MutexGuard, OnceLock};
+
+use burn::module::{Module, ModuleVisitor, Param};
+use burn::prelude::*;
+use model::{ModelConfig, PolicyModel};
+use train::{TrainOptions, metrics};
+
+/// Burn's RNG is process-wide: runs of this test binary must not interleave.
+fn serial() -> MutexGuard<'static, ()> {
+    static LOCK: Mutex<()> = Mutex::new(());
+    LOCK.lock().unwrap_or_else(|e| e.into_inner())
+}
+
+/// One synthetic dataset shared by the tests (4 episodes × 40 steps of 32² frames).
+fn dataset() -> &'static Path {
+    static DIR: OnceLock<tempfile::TempDir> = OnceLock::new();
+    DIR.get_or_init(|| {
+        let d = tempfile::tempdir().unwrap();
+        common::write_dataset(d.path(), 4, 40, 32);
+        d
+    })
+    .path()
+}
+
+fn opts(run_dir: &Path) -> TrainOptions {
+    TrainOptions {
+        run_dir: Some(run_dir.to_path_buf()),
+        ..Default::default()
+    }
+}
+
+/// Every float parameter of the final checkpoint of a run, in visiting order.
+fn final_weights(run_dir: &Path) -> Vec<Vec<f32>> {
+    struct Collect(Vec<Vec<f32>>);
+    impl ModuleVisitor for Collect {
+        fn visit_float<const D: usize>(&mut self, p: &Param<Tensor<D>>) {
+            self.0
+                .push(p.val().into_data().try_to_vec::<f32>().unwrap());
+        }
+    }
+    let cfg: ModelConfig =
+        serde_json::from_str(&std::fs::read_to_string(run_dir.join("model.json")).unwrap())
+            .unwrap();
+    let latest = std::fs::read_to_string(run_dir.join("checkpoints/latest")).unwrap();
+    let path = run_dir
+        .join("checkpoints")
+        .join(latest.trim())
+        .join("model.bpk");
+    let model = PolicyModel::load(&cfg, path, &Device::flex()).unwrap();
+    let mut c = Collect(vec![]);
+    model.visit(&mut c);
+    c.0
+}
+
+fn bits(w: &[Vec<f32>]) -> Vec<Vec<u32>> {
+    w.iter()
+        .map(|t| t.iter().map(|x| x.to_bits()).collect())
+        .collect()
+}
+
+fn write_config(dir: &Path, cfg: &train::Config) -> PathBuf {
+    let p = dir.join("exp.toml");
+    std::fs::write(&p, cfg.to_toml()).unwrap();
+    p
+}
+
+fn train_bin(args: &[&str]) -> std::process::Output {
+    Command::new(env!("CARGO_BIN_EXE_train"))
+        .args(args)
+        .arg("--quiet")
+        .output()
+        .unwrap()
+}
+
+#[test]
+fn tiny_config_halves_the_training_loss() {
+    let _g = serial();
+    let run = tempfile::tempdir().unwrap();
+    let cfg = common::tiny_config(dataset());
+    let s = train::train(&cfg, &opts(run.path())).unwrap();
+    assert_eq!(s.step, cfg.train.steps);
+    let losses: Vec<f64> = metrics::read(&run.path().join("metrics.jsonl"))
+        .unwrap()
+        .iter()
+        .map(|r| r.loss)
+        .collect();
+    assert_eq!(losses.len() as u64, cfg.train.steps);
+    let mean = |x: &[f64]| x.iter().sum::<f64>() / x.len() as f64;
+    let (initial, last) = (mean(&losses[..5]), mean(&losses[losses.len() - 20..]));
+    eprintln!(
+        "loss {initial:.4} → {last:.4} in {} steps ({:.2} steps/s)",
+        s.step, s.steps_per_s
+    );
+    assert!(
+        last < 0.5 * initial,
+        "training loss {initial} → {last}: not below half"
+    );
+    // The run directory holds what eval and humans need.
+    for f in [
+        "config.toml",
+        "model.json",
+        "action_stats.json",
+        "val.jsonl",
+        "plots/loss_loss.png",
+        "plots/loss_action.png",
+        "plots/loss_window.png",
+        "checkpoints/latest",
+    ] {
+        assert!(run.path().join(f).is_file(), "{f} missing");
+    }
+    assert!(s.val_loss.is_some_and(f64::is_finite));
+    // keep = 2: older checkpoints were pruned.
+    let kept = train::checkpoint::list(run.path()).unwrap();
+    assert_eq!(
+        kept.iter().map(|k| k.0).collect::<Vec<_>>(),
+        vec![
+            cfg.train.steps - cfg.train.checkpoint_every,
+            cfg.train.steps
+        ]
+    );
+    // The saved config is the resolved one and loads back.
+    let saved = train::Config::load(run.path().join("config.toml")).unwrap();
+    assert_eq!(saved.train, cfg.train);
+}
+
+/// A short variant of the CI config for the resume tests.
+fn short_config(steps: u64, every: u64) -> train::Config {
+    let mut cfg = common::tiny_config(dataset());
+    cfg.train.steps = steps;
+    cfg.train.checkpoint_every = every;
+    cfg.train.warmup_steps = 3;
+    cfg.train.val_every = 5;
+    cfg.train.keep = 0;
+    cfg
+}
+
+#[test]
+fn stopped_and_resumed_run_ends_with_identical_weights() {
+    let _g = serial();
+    let (a, b) = (tempfile::tempdir().unwrap(), tempfile::tempdir().unwrap());
+    let cfg = short_config(12, 6);
+    train::train(&cfg, &opts(a.path())).unwrap();
+    // Stopped at the mid-way checkpoint, as if killed right after it.
+    let stop = TrainOptions {
+        stop_at: Some(6),
+        ..opts(b.path())
+    };
+    assert_eq!(train::train(&cfg, &stop).unwrap().step, 6);
+    // What a kill -9 during the next checkpoint write can leave: a temporary directory, a
+    // torn metrics line, a `latest` naming a checkpoint that never got its final name.
+    let ck = b.path().join("checkpoints");
+    std::fs::create_dir_all(ck.join(".tmp-killed")).unwrap();
+    std::fs::write(ck.join(".tmp-killed/model.bpk"), b"partial").unwrap();
+    std::fs::write(ck.join("latest"), "step_000000009").unwrap();
+    let mut m = std::fs::OpenOptions::new()
+        .append(true)
+        .open(b.path().join("metrics.jsonl"))
+        .unwrap();
+    std::io::Write::write_all(&mut m, b"{\"step\":7,\"lo").unwrap();
+    // Resuming is automatic when the run directory has checkpoints.
+    let s = train::train(&cfg, &opts(b.path())).unwrap();
+    assert_eq!((s.start_step, s.step), (6, 12));
+    assert!(!ck.join(".tmp-killed").exists());
+    assert_eq!(
+        bits(&final_weights(a.path())),
+        bits(&final_weights(b.path())),
+        "resumed run differs from the uninterrupted one"
+    );
+    let steps: Vec<u64> = metrics::read(&b.path().join("metrics.jsonl"))
+        .unwrap()
+        .iter()
+        .map(|r| r.step)
+        .collect();
+    assert_eq!(steps, (1..=12).collect::<Vec<_>>());
+    // Same config and seed, a second time: the same weights.
+    let c = tempfile::tempdir().unwrap();
+    train::train(&cfg, &opts(c.path())).unwrap();
+    assert_eq!(
+        bits(&final_weights(a.path())),
+        bits(&final_weights(c.path()))
+    );
+}
+
+#[test]
+fn kill_9_mid_run_then_resume_matches_uninterrupted_binary_run() {
+    let _g = serial();
+    let dir = tempfile::tempdir().unwrap();
+    let cfg = short_config(16, 1); // a checkpoint after every step: a kill lands in or near one
+    let path = write_config(dir.path(), &cfg);
+    let (a, b) = (dir.path().join("a"), dir.path().join("b"));
+    let out = train_bin(&[path.to_str().unwrap(), "--run-dir", a.to_str().unwrap()]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+
+    let mut child = Command::new(env!("CARGO_BIN_EXE_train"))
+        .args([
+            path.to_str().unwrap(),
+            "--run-dir",
+            b.to_str().unwrap(),
+            "--quiet",
+        ])
+        .stdout(std::process::Stdio::null())
+        .stderr(std::process::Stdio::null())
+        .spawn()
+        .unwrap();
+    // Wait for the first checkpoints, then kill -9 (SIGKILL) mid-run.
+    let t0 = std::time::Instant::now();
+    while train::checkpoint::list(&b).unwrap().len() < 3 && t0.elapsed().as_secs() < 120 {
+        std::thread::sleep(std::time::Duration::from_millis(5));
+    }
+    std::thread::sleep(std::time::Duration::from_millis(37));
+    child.kill().unwrap();
+    child.wait().unwrap();
+    let done = train::checkpoint::list(&b).unwrap().last().unwrap().0;
+    eprintln!("killed after checkpoint {done}");
+    let out = train_bin(&[
+        path.to_str().unwrap(),
+        "--run-dir",
+        b.to_str().unwrap(),
+        "--resume",
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert_eq!(bits(&final_weights(&a)), bits(&final_weights(&b)));
+}
+
+#[test]
+fn bad_config_key_is_an_error_naming_key_and_file_exit_2() {
+    let dir = tempfile::tempdir().unwrap();
+    let good =
+        std::fs::read_to_string(Path::new(env!("CARGO_MANIFEST_DIR")).join("../configs/tiny.toml"))
+            .unwrap();
+    for (typo, key) in [
+        (good.replace("warmup_steps", "warmup_stpes"), "warmup_stpes"),
+        (good.replace("feature_dim", "feature_dims"), "feature_dims"),
+        (good.replace("[eval]", "[evall]"), "evall"),
+    ] {
+        let p = dir.path().join("typo.toml");
+        std::fs::write(&p, typo).unwrap();
+        let e = train::Config::load(&p).unwrap_err().to_string();
+        assert!(e.contains(key) && e.contains("typo.toml"), "{e}");
+        let out = train_bin(&[p.to_str().unwrap()]);
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(2), "{stderr}");
+        assert!(
+            stderr.contains(key) && stderr.contains("typo.toml"),
+            "{stderr}"
+        );
+    }
+    let out = train_bin(&[dir.path().join("nope.toml").to_str().unwrap()]);
+    assert_eq!(out.status.code(), Some(2));
+}
+
+#[test]
+fn missing_dataset_exits_2_naming_the_directory() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut cfg = common::tiny_config(&dir.path().join("no_such_dataset"));
+    for generate in [false, true] {
+        cfg.data.generate = generate.then(|| train::config::GenerateSpec {
+            task: "t1".into(),
+            episodes: 2,
+            val: 0,
+            seed: 0,
+        });
+        let p = write_config(dir.path(), &cfg);
+        let out = train_bin(&[
+            p.to_str().unwrap(),
+            "--run-dir",
+            dir.path().join("run").to_str().unwrap(),
+        ]);
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(2), "{stderr}");
+        assert!(
+            stderr.contains("dataset missing") && stderr.contains("no_such_dataset"),
+            "{stderr}"
+        );
+    }
+}
+
+#[test]
+fn incompatible_checkpoint_exits_2() {
+    let _g = serial();
+    let dir = tempfile::tempdir().unwrap();
+    let run = dir.path().join("run");
+    let cfg = short_config(2, 2);
+    train::train(&cfg, &opts(&run)).unwrap();
+    let mut other = cfg.clone();
+    other.model.variant = "slotvla_h1".into();
+    let e = train::train(&other, &opts(&run)).unwrap_err();
+    assert_eq!(e.exit_code(), 2);
+    assert!(e.to_string().contains("slotvla_h1"), "{e}");
+    let p = write_config(dir.path(), &other);
+    let out = train_bin(&[p.to_str().unwrap(), "--run-dir", run.to_str().unwrap()]);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(2), "{stderr}");
+    assert!(stderr.contains("incompatible checkpoint"), "{stderr}");
+    // --resume with nothing to resume is bad input too.
+    let empty = dir.path().join("empty");
+    let out = train_bin(&[
+        p.to_str().unwrap(),
+        "--run-dir",
+        empty.to_str().unwrap(),
+        "--resume",
+    ]);
+    assert_eq!(out.status.code(), Some(2));
+}
