@@ -6,6 +6,7 @@
 //! constants), [`controller`] (OSC_POSE and the gripper ramp), [`env`] (reset/step/observe).
 
 pub mod controller;
+pub mod expert;
 pub mod env;
 pub mod mujoco;
 pub mod render;
