@@ -105,6 +105,8 @@ pub enum Op {
         max: usize,
         /// Proportional gain (action units per metre).
         gain: f64,
+        /// Also stop as soon as the pending atom holds (placing).
+        until_pending: bool,
     },
     /// Rotate the hand about world z to `yaw` radians from its initial orientation.
     Yaw {
@@ -279,14 +281,8 @@ impl Expert {
             self.last_satisfied = sat;
             self.nonlive = 0;
         }
-        if let Some(a) = &self.pending {
-            let holds = env
-                .predicates()
-                .and_then(|p| p.eval(&a.predicate, &a.args).ok())
-                .unwrap_or(false);
-            if !holds {
-                self.nonlive += 1;
-            }
+        if self.pending.is_some() && !self.pending_holds(env) {
+            self.nonlive += 1;
         }
         loop {
             if self.cur >= self.ops.len() {
@@ -300,10 +296,24 @@ impl Expert {
                 self.op_steps += 1;
                 return Some(clip(a));
             }
+            if std::env::var_os("SIM_EXPERT_TRACE").is_some() {
+                eprintln!(
+                    "  step {:>3} op {:>2} done after {:>3} steps: {:?} eef {:.3?} sat {}",
+                    obs.step, self.cur, self.op_steps, short(&self.ops[self.cur]), obs.eef_pos, sat
+                );
+            }
             self.cur += 1;
             self.op_steps = 0;
             self.op_start = None;
         }
+    }
+
+    fn pending_holds(&self, env: &Env) -> bool {
+        self.pending.as_ref().is_some_and(|a| {
+            env.predicates()
+                .and_then(|p| p.eval(&a.predicate, &a.args).ok())
+                .unwrap_or(false)
+        })
     }
 
     fn exec(&mut self, scene: &Scene, env: &Env, obs: &Observation) -> Option<[f32; 7]> {
@@ -323,10 +333,14 @@ impl Expert {
                 tol,
                 max,
                 gain,
+                until_pending,
             } => {
                 let t = self.target(scene, env, &target, eef, start);
                 let e = sub(t, eef);
                 if norm(e) < tol || self.op_steps >= max {
+                    return None;
+                }
+                if until_pending && self.pending_holds(env) {
                     return None;
                 }
                 let g = gain * self.speed;
@@ -520,6 +534,11 @@ pub fn run_episode_in(
         failed: g.as_ref().is_some_and(|g| g.failed),
         end,
     })
+}
+
+fn short(op: &Op) -> String {
+    let s = format!("{op:?}");
+    s.chars().take(90).collect()
 }
 
 fn clip(a: [f32; 7]) -> [f32; 7] {

@@ -104,6 +104,18 @@ impl<'a> Builder<'a> {
             tol,
             max,
             gain,
+            until_pending: false,
+        });
+    }
+
+    fn place_mv(&mut self, target: Target, max: usize) {
+        self.ops.push(Op::Move {
+            target,
+            grip: CLOSE,
+            tol: 0.003,
+            max,
+            gain: 8.0,
+            until_pending: true,
         });
     }
 
@@ -248,31 +260,45 @@ impl<'a> Builder<'a> {
         }
     }
 
-    /// The ±y side of `obj` whose neighbourhood is freer (seeded tie-break).
+    /// The ±y side of `obj` whose neighbourhood is freer: the hand (20 cm long along y) reaches past the
+    /// grasp point on that side, so fixtures and other objects there are scored by clearance (seeded
+    /// tie-break).
     fn clear_side(&mut self, obj: usize, p: [f64; 3], r: f64) -> f64 {
         let mut best = [f64::MAX; 2];
         for (s, side) in [1.0, -1.0].iter().enumerate() {
-            let g = [p[0], p[1] + side * r, p[2]];
-            for (k, inst) in self.scene.instances.iter().enumerate() {
-                if k == obj || inst.qpos_adr.is_none() {
-                    continue;
+            for reach in [r, r + 0.06, r + 0.1] {
+                let g = [p[0], p[1] + side * reach, p[2]];
+                for (k, inst) in self.scene.instances.iter().enumerate() {
+                    if k == obj {
+                        continue;
+                    }
+                    let rad = match inst.def.category {
+                        "plate" => continue,
+                        "akita_black_bowl" => 0.055,
+                        "wine_bottle" => 0.025,
+                        "cream_cheese" => 0.04,
+                        "basket" => 0.09,
+                        "wooden_cabinet" => 0.16,
+                        "flat_stove" => 0.1,
+                        "wine_rack" => 0.14,
+                        _ => 0.05,
+                    };
+                    let mut q = self.pos(k);
+                    if inst.def.category == "flat_stove" {
+                        let b = self.scene.instances[k].root_body;
+                        let o = qrot(self.env.data().body_quat(b), [0.1, 0.0, 0.0]);
+                        q = add(q, o);
+                    }
+                    let d = ((q[0] - g[0]).powi(2) + (q[1] - g[1]).powi(2)).sqrt() - rad;
+                    best[s] = best[s].min(d);
                 }
-                let c = inst.def.category;
-                if c == "plate" {
-                    continue;
-                }
-                let q = self.pos(k);
-                let d = ((q[0] - g[0]).powi(2) + (q[1] - g[1]).powi(2)).sqrt();
-                best[s] = best[s].min(d);
             }
         }
-        if (best[0] - best[1]).abs() < 0.03 || (best[0] > 0.12 && best[1] > 0.12) {
-            // Prefer the side nearer the robot's centre line, with a seeded coin for variety.
-            let toward = if p[1] > 0.0 { -1.0 } else { 1.0 };
-            if self.vary && self.rng.random_bool(0.3) && best[0].min(best[1]) > 0.1 {
-                -toward
+        if (best[0] - best[1]).abs() < 0.02 || best[0].min(best[1]) > 0.08 {
+            if self.vary && self.rng.random_bool(0.5) {
+                1.0
             } else {
-                toward
+                -1.0
             }
         } else if best[0] > best[1] {
             1.0
@@ -357,21 +383,22 @@ impl<'a> Builder<'a> {
         let place = match &to {
             Point::Body { inst, off, local } => Point::Body {
                 inst: *inst,
-                off: [off[0] + jx, off[1] + jy, off[2] - 0.001],
+                off: [off[0] + jx, off[1] + jy, off[2] - if drop { 0.0 } else { 0.006 }],
                 local: *local,
             },
             Point::Site { site, off } => Point::Site {
                 site: *site,
-                off: [off[0] + jx, off[1] + jy, if down { drop_z } else { off[2] - 0.001 }],
+                off: [off[0] + jx, off[1] + jy, if down { drop_z } else { off[2] - 0.006 }],
             },
             Point::Abs(p) => Point::Abs([p[0] + jx, p[1] + jy, p[2]]),
         };
-        self.mv(Target::Carry { held: obj, to: place }, 0.005, 45, 8.0);
         if drop {
+            self.mv(Target::Carry { held: obj, to: place }, 0.006, 45, 10.0);
             self.release();
             self.ops.push(Op::WaitSatisfied { n, max: 40, grip: OPEN });
             return;
         }
+        self.place_mv(Target::Carry { held: obj, to: place }, 45);
         self.ops.push(Op::WaitSatisfied { n, max: 40, grip: CLOSE });
         self.pause(CLOSE);
         if next_obj != Some(obj) {
@@ -394,7 +421,7 @@ impl<'a> Builder<'a> {
         let to = Point::Abs([s[0] + jx, s[1] + jy, p0[2] + 0.015]);
         self.mv(Target::Carry { held: basket, to }, 0.012, 100, 10.0);
         let down = Point::Abs([s[0] + jx, s[1] + jy, p0[2] - 0.002]);
-        self.mv(Target::Carry { held: basket, to: down }, 0.005, 20, 8.0);
+        self.place_mv(Target::Carry { held: basket, to: down }, 20);
         self.ops.push(Op::WaitSatisfied { n, max: 40, grip: CLOSE });
         self.release();
     }
@@ -459,6 +486,7 @@ impl<'a> Builder<'a> {
             tol: 0.006,
             max: 60,
             gain: 10.0,
+            until_pending: false,
         });
         self.ops.push(Op::Grip { cmd: OPEN, steps: 8 });
         self.mv(Target::Rel([0.0, 0.0, 0.08]), 0.015, 30, 12.0);
@@ -493,6 +521,7 @@ impl<'a> Builder<'a> {
                 tol: 0.004,
                 max: 15,
                 gain: 10.0,
+                until_pending: false,
             });
         }
         self.mv(Target::Rel([0.0, 0.0, 0.07]), 0.015, 25, 12.0);
