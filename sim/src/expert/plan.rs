@@ -294,6 +294,13 @@ impl<'a> Builder<'a> {
                 }
             }
         }
+        // Reach: the arm straightens (a singularity OSC cannot leave) beyond ~0.72 m from the shoulder.
+        for (s, side) in [1.0, -1.0].iter().enumerate() {
+            let h = horizontal_reach([p[0], p[1] + side * r, p[2]]);
+            if h > 0.69 {
+                best[s] -= 10.0 * (h - 0.69) + 0.05;
+            }
+        }
         if (best[0] - best[1]).abs() < 0.02 || best[0].min(best[1]) > 0.08 {
             if self.vary && self.rng.random_bool(0.5) {
                 1.0
@@ -330,9 +337,9 @@ impl<'a> Builder<'a> {
     /// Height of the held object's origin while carrying.
     fn carry_z(&self, obj: usize, over_basket: bool) -> f64 {
         let base = match self.cat(obj) {
-            "wine_bottle" => TABLE_TOP + 0.08,
-            "cream_cheese" => TABLE_TOP + 0.08,
-            _ => TABLE_TOP + 0.07,
+            "wine_bottle" => TABLE_TOP + 0.10,
+            "cream_cheese" => TABLE_TOP + 0.09,
+            _ => TABLE_TOP + 0.115,
         };
         if over_basket { TABLE_TOP + 0.17 } else { base }
     }
@@ -352,7 +359,17 @@ impl<'a> Builder<'a> {
         let o = self.pos(obj);
         let lift = cz - o[2];
         let lz = lift.max(0.05) + self.jit(0.01);
-        self.mv(Target::Rel([0.0, 0.0, lz]), 0.02, 40, 12.0);
+        // Far out, pull towards the shoulder while lifting (a straight arm is a singularity).
+        let g = self.env.data().site_pos(self.env.robot().grip_site);
+        let h = horizontal_reach(g);
+        let (px, py) = if h > 0.64 {
+            let k = (h - 0.62) / h;
+            (-(g[0] - SHOULDER[0]) * k, -(g[1] - SHOULDER[1]) * k)
+        } else {
+            (0.0, 0.0)
+        };
+        let _ = o;
+        self.mv(Target::Rel([px, py, lz]), 0.02, 40, 12.0);
         // Over the destination at carry height.
         let (jx, jy) = (self.jit(0.004), self.jit(0.004));
         let hover = match &to {
@@ -526,6 +543,14 @@ impl<'a> Builder<'a> {
         }
         self.mv(Target::Rel([0.0, 0.0, 0.07]), 0.015, 25, 12.0);
     }
+}
+
+/// The Panda's shoulder (joint 2 axis) in the world.
+const SHOULDER: [f64; 3] = [-0.66, 0.0, 1.245];
+
+/// Horizontal distance of a point from the shoulder.
+fn horizontal_reach(p: [f64; 3]) -> f64 {
+    ((p[0] - SHOULDER[0]).powi(2) + (p[1] - SHOULDER[1]).powi(2)).sqrt()
 }
 
 /// Height of a held object's origin above the destination object's origin when placed.
