@@ -62,6 +62,16 @@ pub enum Point {
         /// Whether `off` is expressed in the body frame.
         local: bool,
     },
+    /// A bowl's rim on its freer ±y side (decided on the live state): the body position plus
+    /// `(off.x, ±off.y, off.z)`; `coin` breaks ties.
+    Rim {
+        /// Instance.
+        inst: usize,
+        /// Offset (y = rim radius).
+        off: [f64; 3],
+        /// Tie-break.
+        coin: bool,
+    },
     /// A site position plus a world offset.
     Site {
         /// Site id.
@@ -481,6 +491,11 @@ pub fn point(scene: &Scene, env: &Env, p: &Point) -> [f64; 3] {
             add(pos, o)
         }
         Point::Site { site, off } => add(env.data().site_pos(*site), *off),
+        Point::Rim { inst, off, coin } => {
+            let pos = env.data().body_pos(scene.instances[*inst].root_body);
+            let side = plan::clear_side(scene, env, *inst, pos, off[1], *coin);
+            add(pos, [off[0], side * off[1], off[2]])
+        }
     }
 }
 

@@ -32,6 +32,11 @@ pub fn subgoal_branches(g: &Goal) -> Vec<Vec<Vec<Atom>>> {
     }
 }
 
+enum GraspAt {
+    Fixed { off: [f64; 3], local: bool, above: f64 },
+    Rim { off: [f64; 3], coin: bool, above: f64 },
+}
+
 /// Builds a plan on the state at the first step.
 pub(super) struct Builder<'a> {
     scene: &'a Scene,
@@ -233,14 +238,14 @@ impl<'a> Builder<'a> {
     }
 
     /// Grasp offset (in the object's frame when `.1`) and approach height for a category.
-    fn grasp_offset(&mut self, obj: usize) -> ([f64; 3], bool, f64) {
+    fn grasp_offset(&mut self, obj: usize) -> GraspAt {
         let cat = self.cat(obj);
-        match cat {
+        let (off, local, above) = match cat {
             "akita_black_bowl" => {
                 // Pinch the rim wall at ±y (fingers open along world y).
-                let p = self.pos(obj);
-                let side = self.clear_side(obj, p, 0.05);
-                ([self.jit(0.004), side * 0.0485, 0.041 + self.jit(0.003)], false, 0.07)
+                let coin = self.vary && self.rng.random_bool(0.5);
+                let off = [self.jit(0.004), 0.0485, 0.041 + self.jit(0.003)];
+                return GraspAt::Rim { off, coin, above: 0.07 };
             }
             "wine_bottle" => ([self.jit(0.002), self.jit(0.002), 0.13 + self.jit(0.006)], false, 0.08),
             "cream_cheese" => ([self.jit(0.006), self.jit(0.002), 0.003], false, 0.08),
@@ -257,70 +262,25 @@ impl<'a> Builder<'a> {
                 ([side * 0.082, self.jit(0.01), 0.122], true, 0.08)
             }
             _ => ([0.0, 0.0, 0.02], false, 0.08),
-        }
-    }
-
-    /// The ±y side of `obj` whose neighbourhood is freer: the hand (20 cm long along y) reaches past the
-    /// grasp point on that side, so fixtures and other objects there are scored by clearance (seeded
-    /// tie-break).
-    fn clear_side(&mut self, obj: usize, p: [f64; 3], r: f64) -> f64 {
-        let mut best = [f64::MAX; 2];
-        for (s, side) in [1.0, -1.0].iter().enumerate() {
-            for reach in [r, r + 0.06, r + 0.1] {
-                let g = [p[0], p[1] + side * reach, p[2]];
-                for (k, inst) in self.scene.instances.iter().enumerate() {
-                    if k == obj {
-                        continue;
-                    }
-                    let rad = match inst.def.category {
-                        "plate" => continue,
-                        "akita_black_bowl" => 0.055,
-                        "wine_bottle" => 0.025,
-                        "cream_cheese" => 0.04,
-                        "basket" => 0.09,
-                        "wooden_cabinet" => 0.16,
-                        "flat_stove" => 0.1,
-                        "wine_rack" => 0.14,
-                        _ => 0.05,
-                    };
-                    let mut q = self.pos(k);
-                    if inst.def.category == "flat_stove" {
-                        let b = self.scene.instances[k].root_body;
-                        let o = qrot(self.env.data().body_quat(b), [0.1, 0.0, 0.0]);
-                        q = add(q, o);
-                    }
-                    let d = ((q[0] - g[0]).powi(2) + (q[1] - g[1]).powi(2)).sqrt() - rad;
-                    best[s] = best[s].min(d);
-                }
-            }
-        }
-        // Reach: the arm straightens (a singularity OSC cannot leave) beyond ~0.72 m from the shoulder.
-        for (s, side) in [1.0, -1.0].iter().enumerate() {
-            let h = horizontal_reach([p[0], p[1] + side * r, p[2]]);
-            if h > 0.69 {
-                best[s] -= 10.0 * (h - 0.69) + 0.05;
-            }
-        }
-        if (best[0] - best[1]).abs() < 0.02 || best[0].min(best[1]) > 0.08 {
-            if self.vary && self.rng.random_bool(0.5) {
-                1.0
-            } else {
-                -1.0
-            }
-        } else if best[0] > best[1] {
-            1.0
-        } else {
-            -1.0
-        }
+        };
+        GraspAt::Fixed { off, local, above }
     }
 
     fn grasp(&mut self, obj: usize) {
-        let (off, local, above) = self.grasp_offset(obj);
-        let pre = [off[0], off[1], off[2] + above];
+        let (pre, at) = match self.grasp_offset(obj) {
+            GraspAt::Fixed { off, local, above } => (
+                Point::Body { inst: obj, off: [off[0], off[1], off[2] + above], local },
+                Point::Body { inst: obj, off, local },
+            ),
+            GraspAt::Rim { off, coin, above } => (
+                Point::Rim { inst: obj, off: [off[0], off[1], off[2] + above], coin },
+                Point::Rim { inst: obj, off, coin },
+            ),
+        };
         self.ops.push(Op::Grip { cmd: OPEN, steps: 0 });
-        self.mv(Target::Grip(Point::Body { inst: obj, off: pre, local }), 0.02, 90, 12.0);
+        self.mv(Target::Grip(pre), 0.02, 90, 12.0);
         self.pause(OPEN);
-        self.mv(Target::Grip(Point::Body { inst: obj, off, local }), 0.005, 40, 10.0);
+        self.mv(Target::Grip(at), 0.005, 40, 10.0);
         let extra = if self.vary { self.rng.random_range(0..3) } else { 0 };
         self.ops.push(Op::Grip { cmd: CLOSE, steps: 10 + extra });
         self.held = Some(obj);
@@ -383,6 +343,7 @@ impl<'a> Builder<'a> {
                 Point::Site { site: *site, off: [off[0] + jx, off[1] + jy, cz - s[2]] }
             }
             Point::Abs(p) => Point::Abs([p[0] + jx, p[1] + jy, cz]),
+            Point::Rim { .. } => to.clone(),
         };
         self.mv(Target::Carry { held: obj, to: hover }, 0.012, 90, 12.0);
         self.ops.push(Op::WaitNonlive { n: 17, max: 40, grip: CLOSE });
@@ -408,6 +369,7 @@ impl<'a> Builder<'a> {
                 off: [off[0] + jx, off[1] + jy, if down { drop_z } else { off[2] - 0.006 }],
             },
             Point::Abs(p) => Point::Abs([p[0] + jx, p[1] + jy, p[2]]),
+            Point::Rim { .. } => to.clone(),
         };
         if drop {
             self.mv(Target::Carry { held: obj, to: place }, 0.006, 45, 10.0);
@@ -544,6 +506,61 @@ impl<'a> Builder<'a> {
         self.mv(Target::Rel([0.0, 0.0, 0.07]), 0.015, 25, 12.0);
     }
 }
+
+/// The ±y side of `obj` whose neighbourhood is freer: the hand (20 cm long along y) reaches past the
+/// grasp point on that side, so fixtures and other objects there are scored by clearance (seeded
+/// tie-break).
+pub(super) fn clear_side(scene: &Scene, env: &Env, obj: usize, p: [f64; 3], r: f64, coin: bool) -> f64 {
+    let mut best = [f64::MAX; 2];
+    for (s, side) in [1.0, -1.0].iter().enumerate() {
+        for reach in [r, r + 0.06, r + 0.1] {
+            let g = [p[0], p[1] + side * reach, p[2]];
+            for (k, inst) in scene.instances.iter().enumerate() {
+                if k == obj {
+                    continue;
+                }
+                let rad = match inst.def.category {
+                    "plate" => continue,
+                    "akita_black_bowl" => 0.055,
+                    "wine_bottle" => 0.025,
+                    "cream_cheese" => 0.04,
+                    "basket" => 0.09,
+                    "wooden_cabinet" => 0.16,
+                    "flat_stove" => 0.1,
+                    "wine_rack" => 0.14,
+                    _ => 0.05,
+                };
+                let mut q = env.data().body_pos(scene.instances[k].root_body);
+                if inst.def.category == "flat_stove" {
+                    let b = scene.instances[k].root_body;
+                    let o = qrot(env.data().body_quat(b), [0.1, 0.0, 0.0]);
+                    q = add(q, o);
+                }
+                let d = ((q[0] - g[0]).powi(2) + (q[1] - g[1]).powi(2)).sqrt() - rad;
+                best[s] = best[s].min(d);
+            }
+        }
+    }
+    // Reach: the arm straightens (a singularity OSC cannot leave) beyond ~0.72 m from the shoulder.
+    for (s, side) in [1.0, -1.0].iter().enumerate() {
+        let h = horizontal_reach([p[0], p[1] + side * r, p[2]]);
+        if h > 0.69 {
+            best[s] -= 10.0 * (h - 0.69) + 0.05;
+        }
+    }
+    if (best[0] - best[1]).abs() < 0.02 || best[0].min(best[1]) > 0.08 {
+        if coin {
+            1.0
+        } else {
+            -1.0
+        }
+    } else if best[0] > best[1] {
+        1.0
+    } else {
+        -1.0
+    }
+}
+
 
 /// The Panda's shoulder (joint 2 axis) in the world.
 const SHOULDER: [f64; 3] = [-0.66, 0.0, 1.245];
