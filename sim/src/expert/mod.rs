@@ -97,6 +97,14 @@ pub enum Target {
     Rel([f64; 3]),
     /// The grip site to its start position with z replaced.
     RelZ(f64),
+    /// From the start position: up by `dz`, and horizontally towards the shoulder until at most `h`
+    /// metres from it (far out, a high straight arm is a singularity OSC cannot leave).
+    PullIn {
+        /// Horizontal distance from the shoulder to get within.
+        h: f64,
+        /// Lift.
+        dz: f64,
+    },
 }
 
 /// One low-level step of a plan.
@@ -472,6 +480,16 @@ impl Expert {
             }
             Target::Rel(d) => add(start, *d),
             Target::RelZ(z) => [start[0], start[1], *z],
+            Target::PullIn { h, dz } => {
+                let (sx, sy) = (plan::SHOULDER[0], plan::SHOULDER[1]);
+                let d = ((start[0] - sx).powi(2) + (start[1] - sy).powi(2)).sqrt();
+                let k = if d > *h { (d - h) / d } else { 0.0 };
+                [
+                    start[0] - (start[0] - sx) * k,
+                    start[1] - (start[1] - sy) * k,
+                    start[2] + dz,
+                ]
+            }
         }
     }
 }

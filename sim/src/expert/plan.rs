@@ -46,6 +46,7 @@ pub(super) struct Builder<'a> {
     ops: Vec<Op>,
     held: Option<usize>,
     yaw: f64,
+    held_grasp_xy: Option<[f64; 2]>,
 }
 
 impl<'a> Builder<'a> {
@@ -63,6 +64,7 @@ impl<'a> Builder<'a> {
             ops: Vec::new(),
             held: None,
             yaw: 0.0,
+            held_grasp_xy: None,
         }
     }
 
@@ -284,6 +286,8 @@ impl<'a> Builder<'a> {
         let extra = if self.vary { self.rng.random_range(0..3) } else { 0 };
         self.ops.push(Op::Grip { cmd: CLOSE, steps: 10 + extra });
         self.held = Some(obj);
+        let p = self.pos(obj);
+        self.held_grasp_xy = Some([p[0], p[1]]);
     }
 
     fn release(&mut self) {
@@ -314,22 +318,25 @@ impl<'a> Builder<'a> {
             self.grasp(obj);
         }
         let into_basket = drop && matches!(&to, Point::Site { .. }) && self.cat(obj) == "cream_cheese";
-        let cz = self.carry_z(obj, into_basket);
+        let mut cz = self.carry_z(obj, into_basket);
+        let dest_p = match &to {
+            Point::Body { inst, .. } => self.pos(*inst),
+            Point::Site { site, .. } => self.env.data().site_pos(*site),
+            Point::Abs(p) => *p,
+            Point::Rim { inst, .. } => self.pos(*inst),
+        };
+        let far = horizontal_reach(dest_p) > 0.68 || horizontal_reach(self.pos(obj)) > 0.68;
+        if far && !into_basket {
+            cz -= 0.035;
+        }
         // Lift straight up first.
         let o = self.pos(obj);
         let lift = cz - o[2];
         let lz = lift.max(0.05) + self.jit(0.01);
-        // Far out, pull towards the shoulder while lifting (a straight arm is a singularity).
-        let g = self.env.data().site_pos(self.env.robot().grip_site);
-        let h = horizontal_reach(g);
-        let (px, py) = if h > 0.64 {
-            let k = (h - 0.62) / h;
-            (-(g[0] - SHOULDER[0]) * k, -(g[1] - SHOULDER[1]) * k)
-        } else {
-            (0.0, 0.0)
-        };
-        let _ = o;
-        self.mv(Target::Rel([px, py, lz]), 0.02, 40, 12.0);
+        // Far out, first pull in towards the shoulder at low height (a straight arm is a singularity
+        // OSC cannot leave; high poses reach less far), then lift.
+        self.mv(Target::PullIn { h: 0.63, dz: 0.03 }, 0.015, 30, 12.0);
+        self.mv(Target::Rel([0.0, 0.0, (lz - 0.03).max(0.02)]), 0.02, 40, 12.0);
         // Over the destination at carry height.
         let (jx, jy) = (self.jit(0.004), self.jit(0.004));
         let hover = match &to {
@@ -563,7 +570,7 @@ pub(super) fn clear_side(scene: &Scene, env: &Env, obj: usize, p: [f64; 3], r: f
 
 
 /// The Panda's shoulder (joint 2 axis) in the world.
-const SHOULDER: [f64; 3] = [-0.66, 0.0, 1.245];
+pub(super) const SHOULDER: [f64; 3] = [-0.66, 0.0, 1.245];
 
 /// Horizontal distance of a point from the shoulder.
 fn horizontal_reach(p: [f64; 3]) -> f64 {
