@@ -47,6 +47,7 @@ pub(super) struct Builder<'a> {
     held: Option<usize>,
     yaw: f64,
     held_grasp_xy: Option<[f64; 2]>,
+    expected: Vec<(usize, [f64; 3])>,
 }
 
 impl<'a> Builder<'a> {
@@ -65,6 +66,7 @@ impl<'a> Builder<'a> {
             held: None,
             yaw: 0.0,
             held_grasp_xy: None,
+            expected: Vec::new(),
         }
     }
 
@@ -240,9 +242,23 @@ impl<'a> Builder<'a> {
     }
 
     /// Grasp offset (in the object's frame when `.1`) and approach height for a category.
+    /// Where `obj` will be when the plan reaches it (after the moves planned so far).
+    fn expected_pos(&self, obj: usize) -> [f64; 3] {
+        self.expected
+            .iter()
+            .rev()
+            .find(|(o, _)| *o == obj)
+            .map(|(_, p)| *p)
+            .unwrap_or_else(|| self.pos(obj))
+    }
+
     fn grasp_offset(&mut self, obj: usize) -> GraspAt {
         let cat = self.cat(obj);
         let (off, local, above) = match cat {
+            "akita_black_bowl" if horizontal_reach(self.expected_pos(obj)) > 0.72 => {
+                // Far out: yaw the hand by 90° and pinch the near (−x) rim.
+                ([-0.0485, self.jit(0.003), 0.041 + self.jit(0.003)], false, 0.07)
+            }
             "akita_black_bowl" => {
                 // Pinch the rim wall at ±y (fingers open along world y).
                 let coin = self.vary && self.rng.random_bool(0.5);
@@ -279,7 +295,13 @@ impl<'a> Builder<'a> {
                 Point::Rim { inst: obj, off, coin },
             ),
         };
+        let far = self.cat(obj) == "akita_black_bowl" && horizontal_reach(self.expected_pos(obj)) > 0.72;
+        let want_yaw = if far { std::f64::consts::FRAC_PI_2 } else { 0.0 };
         self.ops.push(Op::Grip { cmd: OPEN, steps: 0 });
+        if (want_yaw - self.yaw).abs() > 1e-6 {
+            self.yaw = want_yaw;
+            self.ops.push(Op::Yaw { yaw: want_yaw, grip: OPEN, max: 25 });
+        }
         self.mv(Target::Grip(pre), 0.02, 90, 12.0);
         self.pause(OPEN);
         self.mv(Target::Grip(at), 0.005, 40, 10.0);
@@ -318,6 +340,10 @@ impl<'a> Builder<'a> {
             self.grasp(obj);
         }
         let into_basket = drop && matches!(&to, Point::Site { .. }) && self.cat(obj) == "cream_cheese";
+        if let Point::Body { inst, .. } = &to {
+            let p = self.pos(*inst);
+            self.expected.push((obj, p));
+        }
         let mut cz = self.carry_z(obj, into_basket);
         let dest_p = match &to {
             Point::Body { inst, .. } => self.pos(*inst),
