@@ -355,6 +355,13 @@ impl<'a> Builder<'a> {
         if far && !into_basket {
             cz -= 0.035;
         }
+        // Raised destinations (cabinet top, stove): clear them by a few centimetres.
+        if let Point::Site { site, .. } = &to {
+            let sz = self.env.data().site_pos(*site)[2];
+            if !into_basket && !drop {
+                cz = cz.max(sz + 0.05);
+            }
+        }
         // Lift straight up first.
         let o = self.pos(obj);
         let lift = cz - o[2];
