@@ -559,15 +559,23 @@ pub(super) fn clear_side(scene: &Scene, env: &Env, obj: usize, p: [f64; 3], r: f
                 if k == obj {
                     continue;
                 }
+                let tall = matches!(
+                    inst.def.category,
+                    "wine_bottle" | "basket" | "wooden_cabinet" | "wine_rack" | "flat_stove"
+                );
+                if reach > r && !tall {
+                    // The hand box passes over low objects; only the fingers reach them.
+                    continue;
+                }
                 let rad = match inst.def.category {
                     "plate" => continue,
                     "akita_black_bowl" => 0.055,
                     "wine_bottle" => 0.025,
                     "cream_cheese" => 0.04,
                     "basket" => 0.09,
-                    "wooden_cabinet" => 0.16,
+                    "wooden_cabinet" => 0.17,
                     "flat_stove" => 0.1,
-                    "wine_rack" => 0.14,
+                    "wine_rack" => 0.19,
                     _ => 0.05,
                 };
                 let mut q = env.data().body_pos(scene.instances[k].root_body);
