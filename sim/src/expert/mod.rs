@@ -20,7 +20,7 @@ use rand_chacha::ChaCha8Rng;
 use crate::controller::orientation_error;
 use crate::env::{Env, EnvConfig, EnvError, Observation};
 use crate::scene::Scene;
-use crate::task::{Atom, Goal, TaskSpec};
+use crate::task::{Atom, TaskSpec};
 
 mod plan;
 
@@ -618,19 +618,9 @@ fn quat_mat(q: [f64; 4]) -> Matrix3<f64> {
     uq.to_rotation_matrix().into_inner()
 }
 
-/// Yaw (rad) of a quaternion's x axis in the world xy plane.
-pub(crate) fn yaw_of(q: [f64; 4]) -> f64 {
-    let x = qrot(q, [1.0, 0.0, 0.0]);
-    x[1].atan2(x[0])
-}
-
 pub(crate) fn gaussian(rng: &mut ChaCha8Rng) -> f64 {
     let u1: f64 = rng.random_range(f64::MIN_POSITIVE..1.0);
     let u2: f64 = rng.random();
     (-2.0 * u1.ln()).sqrt() * (std::f64::consts::TAU * u2).cos()
 }
 
-#[allow(dead_code)]
-fn _goal_type_check(g: &Goal) -> usize {
-    g.atoms().len()
-}

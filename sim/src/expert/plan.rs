@@ -522,28 +522,28 @@ impl<'a> Builder<'a> {
         let _ = b;
         let c = self.env.data().body_pos(knob);
         let q = self.env.data().body_quat(knob);
-        // Bar along the knob's local y; a +z rotation moves its +y end towards local −x.
-        let r = 0.017;
+        // Bar along the knob's local y; a +z rotation moves its +y end towards local −x. The closed
+        // fingertips go down beside the bar (+x side, near its +y end) and push along −x until on.
+        let yb = 0.012 + self.jit(0.002);
         let z = c[2] + 0.030;
+        // Fingers closed throughout (grip_now() follows `held`).
+        self.held = Some(stove);
         self.ops.push(Op::Grip { cmd: CLOSE, steps: 0 });
-        let start = qrot(q, [0.022, r, 0.0]);
+        let start = qrot(q, [0.024, yb, 0.0]);
         let pre = [c[0] + start[0], c[1] + start[1], z + 0.06];
         self.mv(Target::Grip(Point::Abs(pre)), 0.015, 80, 12.0);
         self.mv(Target::Grip(Point::Abs([pre[0], pre[1], z])), 0.005, 30, 10.0);
-        // Sweep an arc to ~1.2 rad.
-        for k in 1..=6 {
-            let a = 0.25 * k as f64;
-            let p = qrot(q, [-r * a.sin() + 0.022 * a.cos(), r * a.cos() + 0.022 * a.sin(), 0.0]);
-            self.ops.push(Op::Move {
-                target: Target::Grip(Point::Abs([c[0] + p[0], c[1] + p[1], z])),
-                grip: CLOSE,
-                tol: 0.004,
-                max: 15,
-                gain: 10.0,
-                until_pending: false,
-            });
-        }
+        let end = qrot(q, [-0.03, yb, 0.0]);
+        self.ops.push(Op::Move {
+            target: Target::Grip(Point::Abs([c[0] + end[0], c[1] + end[1], z])),
+            grip: CLOSE,
+            tol: 0.004,
+            max: 80,
+            gain: 14.0,
+            until_pending: true,
+        });
         self.mv(Target::Rel([0.0, 0.0, 0.07]), 0.015, 25, 12.0);
+        self.held = None;
     }
 }
 
