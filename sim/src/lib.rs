@@ -6,8 +6,8 @@
 //! constants), [`controller`] (OSC_POSE and the gripper ramp), [`env`] (reset/step/observe).
 
 pub mod controller;
-pub mod expert;
 pub mod env;
+pub mod expert;
 pub mod mujoco;
 pub mod render;
 pub mod robot;

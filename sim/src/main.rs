@@ -364,11 +364,13 @@ fn expert_eval(
     for t in task.split(',') {
         match t {
             "all" => tasks.extend(sim::task::list()),
-            "mem" | "goal" => tasks.extend(
-                sim::task::list()
-                    .into_iter()
-                    .filter(|s| s.id.starts_with(if t == "mem" { "libero_mem" } else { "libero_goal" })),
-            ),
+            "mem" | "goal" => tasks.extend(sim::task::list().into_iter().filter(|s| {
+                s.id.starts_with(if t == "mem" {
+                    "libero_mem"
+                } else {
+                    "libero_goal"
+                })
+            })),
             id => {
                 let spec = match repeat {
                     Some(n) => sim::task::resolve_with_repeats(id, n),

@@ -74,7 +74,10 @@ fn actions_stay_in_range_and_the_gripper_closes_before_lifting() {
         .iter()
         .take_while(|a| a[6] > 0.0 && a[2] <= 0.0)
         .count();
-    assert!(closing >= 8, "gripper closed for only {closing} steps before lifting");
+    assert!(
+        closing >= 8,
+        "gripper closed for only {closing} steps before lifting"
+    );
 }
 
 #[test]

@@ -317,7 +317,12 @@ impl Expert {
             if std::env::var_os("SIM_EXPERT_TRACE").is_some() {
                 eprintln!(
                     "  step {:>3} op {:>2} done after {:>3} steps: {:?} eef {:.3?} sat {}",
-                    obs.step, self.cur, self.op_steps, short(&self.ops[self.cur]), obs.eef_pos, sat
+                    obs.step,
+                    self.cur,
+                    self.op_steps,
+                    short(&self.ops[self.cur]),
+                    obs.eef_pos,
+                    sat
                 );
             }
             self.cur += 1;
@@ -623,4 +628,3 @@ pub(crate) fn gaussian(rng: &mut ChaCha8Rng) -> f64 {
     let u2: f64 = rng.random();
     (-2.0 * u1.ln()).sqrt() * (std::f64::consts::TAU * u2).cos()
 }
-

@@ -33,8 +33,16 @@ pub fn subgoal_branches(g: &Goal) -> Vec<Vec<Vec<Atom>>> {
 }
 
 enum GraspAt {
-    Fixed { off: [f64; 3], local: bool, above: f64 },
-    Rim { off: [f64; 3], coin: bool, above: f64 },
+    Fixed {
+        off: [f64; 3],
+        local: bool,
+        above: f64,
+    },
+    Rim {
+        off: [f64; 3],
+        coin: bool,
+        above: f64,
+    },
 }
 
 /// Builds a plan on the state at the first step.
@@ -79,9 +87,7 @@ impl<'a> Builder<'a> {
     }
 
     fn pos(&self, i: usize) -> [f64; 3] {
-        self.env
-            .data()
-            .body_pos(self.scene.instances[i].root_body)
+        self.env.data().body_pos(self.scene.instances[i].root_body)
     }
 
     fn jit(&mut self, r: f64) -> f64 {
@@ -198,7 +204,17 @@ impl<'a> Builder<'a> {
                     // Object on object.
                     let dz = place_height(cat, self.cat(d));
                     let drop = self.cat(d) == "akita_black_bowl";
-                    self.pick_place(obj, Point::Body { inst: d, off: [0.0, 0.0, dz], local: false }, n, next_obj, drop);
+                    self.pick_place(
+                        obj,
+                        Point::Body {
+                            inst: d,
+                            off: [0.0, 0.0, dz],
+                            local: false,
+                        },
+                        n,
+                        next_obj,
+                        drop,
+                    );
                 } else if let Some(r) = self.scene.regions.get(dest) {
                     let Some(site) = r.site else { return };
                     match cat {
@@ -206,7 +222,16 @@ impl<'a> Builder<'a> {
                         "basket" => self.drag_basket(obj, site, n),
                         _ => {
                             let dz = site_place_height(cat, dest);
-                            self.pick_place(obj, Point::Site { site, off: [0.0, 0.0, dz] }, n, next_obj, false);
+                            self.pick_place(
+                                obj,
+                                Point::Site {
+                                    site,
+                                    off: [0.0, 0.0, dz],
+                                },
+                                n,
+                                next_obj,
+                                false,
+                            );
                         }
                     }
                 }
@@ -222,20 +247,46 @@ impl<'a> Builder<'a> {
                 if !r.joints.is_empty() {
                     // A drawer: open it first.
                     self.open_drawer(&atom.args[1]);
-                    self.pick_place(obj, Point::Site { site, off: [0.0, 0.0, 0.0] }, n, next_obj, true);
+                    self.pick_place(
+                        obj,
+                        Point::Site {
+                            site,
+                            off: [0.0, 0.0, 0.0],
+                        },
+                        n,
+                        next_obj,
+                        true,
+                    );
                 } else {
-                    self.pick_place(obj, Point::Site { site, off: [0.0, 0.0, 0.0] }, n, next_obj, true);
+                    self.pick_place(
+                        obj,
+                        Point::Site {
+                            site,
+                            off: [0.0, 0.0, 0.0],
+                        },
+                        n,
+                        next_obj,
+                        true,
+                    );
                 }
             }
             "open" => {
                 self.open_drawer(&atom.args[0]);
-                self.ops.push(Op::WaitSatisfied { n, max: 30, grip: self.grip_now() });
+                self.ops.push(Op::WaitSatisfied {
+                    n,
+                    max: 30,
+                    grip: self.grip_now(),
+                });
             }
             "turnon" => {
                 if let Some(stove) = self.inst(&atom.args[0]) {
                     self.turn_knob(stove);
                 }
-                self.ops.push(Op::WaitSatisfied { n, max: 30, grip: OPEN });
+                self.ops.push(Op::WaitSatisfied {
+                    n,
+                    max: 30,
+                    grip: OPEN,
+                });
             }
             _ => {}
         }
@@ -257,20 +308,35 @@ impl<'a> Builder<'a> {
         let (off, local, above) = match cat {
             "akita_black_bowl" if horizontal_reach(self.expected_pos(obj)) > 0.72 => {
                 // Far out: yaw the hand by 90° and pinch the near (−x) rim.
-                ([-0.0485, self.jit(0.003), 0.041 + self.jit(0.003)], false, 0.07)
+                (
+                    [-0.0485, self.jit(0.003), 0.041 + self.jit(0.003)],
+                    false,
+                    0.07,
+                )
             }
             "akita_black_bowl" => {
                 // Pinch the rim wall at ±y (fingers open along world y).
                 let coin = self.vary && self.rng.random_bool(0.5);
                 let off = [self.jit(0.004), 0.0485, 0.041 + self.jit(0.003)];
-                return GraspAt::Rim { off, coin, above: 0.07 };
+                return GraspAt::Rim {
+                    off,
+                    coin,
+                    above: 0.07,
+                };
             }
-            "wine_bottle" => ([self.jit(0.002), self.jit(0.002), 0.13 + self.jit(0.006)], false, 0.08),
+            "wine_bottle" => (
+                [self.jit(0.002), self.jit(0.002), 0.13 + self.jit(0.006)],
+                false,
+                0.08,
+            ),
             "cream_cheese" => ([self.jit(0.006), self.jit(0.002), 0.003], false, 0.08),
             "basket" => {
                 // The walls at local ±x face world ±y (placement yaw π/2); pinch the one nearer y = 0.
                 let p = self.pos(obj);
-                let q = self.env.data().body_quat(self.scene.instances[obj].root_body);
+                let q = self
+                    .env
+                    .data()
+                    .body_quat(self.scene.instances[obj].root_body);
                 let wx = qrot(q, [1.0, 0.0, 0.0]);
                 let side = if (p[1] + wx[1] * 0.082).abs() < (p[1] - wx[1] * 0.082).abs() {
                     1.0
@@ -287,34 +353,76 @@ impl<'a> Builder<'a> {
     fn grasp(&mut self, obj: usize) {
         let (pre, at) = match self.grasp_offset(obj) {
             GraspAt::Fixed { off, local, above } => (
-                Point::Body { inst: obj, off: [off[0], off[1], off[2] + above], local },
-                Point::Body { inst: obj, off, local },
+                Point::Body {
+                    inst: obj,
+                    off: [off[0], off[1], off[2] + above],
+                    local,
+                },
+                Point::Body {
+                    inst: obj,
+                    off,
+                    local,
+                },
             ),
             GraspAt::Rim { off, coin, above } => (
-                Point::Rim { inst: obj, off: [off[0], off[1], off[2] + above], coin },
-                Point::Rim { inst: obj, off, coin },
+                Point::Rim {
+                    inst: obj,
+                    off: [off[0], off[1], off[2] + above],
+                    coin,
+                },
+                Point::Rim {
+                    inst: obj,
+                    off,
+                    coin,
+                },
             ),
         };
-        let far = self.cat(obj) == "akita_black_bowl" && horizontal_reach(self.expected_pos(obj)) > 0.72;
-        let want_yaw = if far { std::f64::consts::FRAC_PI_2 } else { 0.0 };
-        self.ops.push(Op::Grip { cmd: OPEN, steps: 0 });
+        let far =
+            self.cat(obj) == "akita_black_bowl" && horizontal_reach(self.expected_pos(obj)) > 0.72;
+        let want_yaw = if far {
+            std::f64::consts::FRAC_PI_2
+        } else {
+            0.0
+        };
+        self.ops.push(Op::Grip {
+            cmd: OPEN,
+            steps: 0,
+        });
         if (want_yaw - self.yaw).abs() > 1e-6 {
             self.yaw = want_yaw;
-            self.ops.push(Op::Yaw { yaw: want_yaw, grip: OPEN, max: 25 });
+            self.ops.push(Op::Yaw {
+                yaw: want_yaw,
+                grip: OPEN,
+                max: 25,
+            });
         }
         self.mv(Target::Grip(pre), 0.02, 90, 12.0);
         self.pause(OPEN);
         self.mv(Target::Grip(at), 0.005, 40, 10.0);
-        let extra = if self.vary { self.rng.random_range(0..3) } else { 0 };
-        self.ops.push(Op::Grip { cmd: CLOSE, steps: 10 + extra });
+        let extra = if self.vary {
+            self.rng.random_range(0..3)
+        } else {
+            0
+        };
+        self.ops.push(Op::Grip {
+            cmd: CLOSE,
+            steps: 10 + extra,
+        });
         self.held = Some(obj);
         let p = self.pos(obj);
         self.held_grasp_xy = Some([p[0], p[1]]);
     }
 
     fn release(&mut self) {
-        let extra = if self.vary { self.rng.random_range(0..3) } else { 0 };
-        self.ops.push(Op::Grip { cmd: OPEN, steps: 8 + extra });
+        let extra = if self.vary {
+            self.rng.random_range(0..3)
+        } else {
+            0
+        };
+        self.ops.push(Op::Grip {
+            cmd: OPEN,
+            steps: 8 + extra,
+        });
         self.held = None;
         let up = 0.07 + self.jit(0.015);
         self.mv(Target::Rel([0.0, 0.0, up]), 0.015, 30, 12.0);
@@ -339,7 +447,8 @@ impl<'a> Builder<'a> {
             }
             self.grasp(obj);
         }
-        let into_basket = drop && matches!(&to, Point::Site { .. }) && self.cat(obj) == "cream_cheese";
+        let into_basket =
+            drop && matches!(&to, Point::Site { .. }) && self.cat(obj) == "cream_cheese";
         if let Point::Body { inst, .. } = &to {
             let p = self.pos(*inst);
             self.expected.push((obj, p));
@@ -369,7 +478,12 @@ impl<'a> Builder<'a> {
         // Far out, first pull in towards the shoulder at low height (a straight arm is a singularity
         // OSC cannot leave; high poses reach less far), then lift.
         self.mv(Target::PullIn { h: 0.63, dz: 0.03 }, 0.015, 30, 12.0);
-        self.mv(Target::Rel([0.0, 0.0, (lz - 0.03).max(0.02)]), 0.02, 40, 12.0);
+        self.mv(
+            Target::Rel([0.0, 0.0, (lz - 0.03).max(0.02)]),
+            0.02,
+            40,
+            12.0,
+        );
         // Over the destination at carry height.
         let (jx, jy) = (self.jit(0.004), self.jit(0.004));
         let hover = match &to {
@@ -380,20 +494,39 @@ impl<'a> Builder<'a> {
             },
             Point::Site { site, off } => {
                 let s = self.env.data().site_pos(*site);
-                Point::Site { site: *site, off: [off[0] + jx, off[1] + jy, cz - s[2]] }
+                Point::Site {
+                    site: *site,
+                    off: [off[0] + jx, off[1] + jy, cz - s[2]],
+                }
             }
             Point::Abs(p) => Point::Abs([p[0] + jx, p[1] + jy, cz]),
             Point::Rim { .. } => to.clone(),
         };
-        self.mv(Target::Carry { held: obj, to: hover }, 0.012, 90, 12.0);
-        self.ops.push(Op::WaitNonlive { n: 17, max: 40, grip: CLOSE });
+        self.mv(
+            Target::Carry {
+                held: obj,
+                to: hover,
+            },
+            0.012,
+            90,
+            12.0,
+        );
+        self.ops.push(Op::WaitNonlive {
+            n: 17,
+            max: 40,
+            grip: CLOSE,
+        });
         let (down, drop_z) = if drop {
             let s = match &to {
                 Point::Site { site, .. } => self.env.data().site_pos(*site),
                 _ => [0.0; 3],
             };
             // Into a basket: release from just above the rim; into a drawer: low.
-            let z = if into_basket { TABLE_TOP + 0.165 - s[2] } else { 0.03 };
+            let z = if into_basket {
+                TABLE_TOP + 0.165 - s[2]
+            } else {
+                0.03
+            };
             (true, z)
         } else {
             (false, 0.0)
@@ -401,24 +534,54 @@ impl<'a> Builder<'a> {
         let place = match &to {
             Point::Body { inst, off, local } => Point::Body {
                 inst: *inst,
-                off: [off[0] + jx, off[1] + jy, off[2] - if drop { 0.0 } else { 0.006 }],
+                off: [
+                    off[0] + jx,
+                    off[1] + jy,
+                    off[2] - if drop { 0.0 } else { 0.006 },
+                ],
                 local: *local,
             },
             Point::Site { site, off } => Point::Site {
                 site: *site,
-                off: [off[0] + jx, off[1] + jy, if down { drop_z } else { off[2] - 0.006 }],
+                off: [
+                    off[0] + jx,
+                    off[1] + jy,
+                    if down { drop_z } else { off[2] - 0.006 },
+                ],
             },
             Point::Abs(p) => Point::Abs([p[0] + jx, p[1] + jy, p[2]]),
             Point::Rim { .. } => to.clone(),
         };
         if drop {
-            self.mv(Target::Carry { held: obj, to: place }, 0.006, 45, 10.0);
+            self.mv(
+                Target::Carry {
+                    held: obj,
+                    to: place,
+                },
+                0.006,
+                45,
+                10.0,
+            );
             self.release();
-            self.ops.push(Op::WaitSatisfied { n, max: 40, grip: OPEN });
+            self.ops.push(Op::WaitSatisfied {
+                n,
+                max: 40,
+                grip: OPEN,
+            });
             return;
         }
-        self.place_mv(Target::Carry { held: obj, to: place }, 45);
-        self.ops.push(Op::WaitSatisfied { n, max: 40, grip: CLOSE });
+        self.place_mv(
+            Target::Carry {
+                held: obj,
+                to: place,
+            },
+            45,
+        );
+        self.ops.push(Op::WaitSatisfied {
+            n,
+            max: 40,
+            grip: CLOSE,
+        });
         self.pause(CLOSE);
         if next_obj != Some(obj) {
             self.release();
@@ -440,8 +603,18 @@ impl<'a> Builder<'a> {
         let to = Point::Abs([s[0] + jx, s[1] + jy, p0[2] + 0.015]);
         self.mv(Target::Carry { held: basket, to }, 0.012, 100, 10.0);
         let down = Point::Abs([s[0] + jx, s[1] + jy, p0[2] - 0.002]);
-        self.place_mv(Target::Carry { held: basket, to: down }, 20);
-        self.ops.push(Op::WaitSatisfied { n, max: 40, grip: CLOSE });
+        self.place_mv(
+            Target::Carry {
+                held: basket,
+                to: down,
+            },
+            20,
+        );
+        self.ops.push(Op::WaitSatisfied {
+            n,
+            max: 40,
+            grip: CLOSE,
+        });
         self.release();
     }
 
@@ -450,17 +623,27 @@ impl<'a> Builder<'a> {
         if self.held.is_some() {
             self.release();
         }
-        self.ops.push(Op::Grip { cmd: CLOSE, steps: 0 });
+        self.ops.push(Op::Grip {
+            cmd: CLOSE,
+            steps: 0,
+        });
         let (jx, jy) = (self.jit(0.01), self.jit(0.01));
         self.ops.push(Op::Push {
             inst: obj,
-            to: Point::Site { site, off: [jx, jy, 0.0] },
+            to: Point::Site {
+                site,
+                off: [jx, jy, 0.0],
+            },
             radius: 0.069 + 0.012,
             z: 0.012,
             tol: 0.012,
             max: 220,
         });
-        self.ops.push(Op::WaitSatisfied { n, max: 20, grip: CLOSE });
+        self.ops.push(Op::WaitSatisfied {
+            n,
+            max: 20,
+            grip: CLOSE,
+        });
         self.mv(Target::Rel([0.0, 0.0, 0.08]), 0.015, 25, 12.0);
     }
 
@@ -484,18 +667,31 @@ impl<'a> Builder<'a> {
             return;
         };
         let hp = self.env.data().geom_pos(geom);
-        let q = self.env.data().body_quat(self.scene.instances[cab].root_body);
+        let q = self
+            .env
+            .data()
+            .body_quat(self.scene.instances[cab].root_body);
         let out = qrot(q, [0.0, -1.0, 0.0]);
         let q0 = self.env.data().qpos()[qadr];
         // Fingers along the bar (cabinet x): rotate the hand by 90° about z.
-        self.ops.push(Op::Grip { cmd: OPEN, steps: 0 });
+        self.ops.push(Op::Grip {
+            cmd: OPEN,
+            steps: 0,
+        });
         self.yaw = std::f64::consts::FRAC_PI_2;
         let pre = [hp[0] + out[0] * 0.012, hp[1] + out[1] * 0.012, hp[2] + 0.08];
         self.mv(Target::Grip(Point::Abs(pre)), 0.02, 80, 12.0);
-        self.ops.push(Op::Yaw { yaw: self.yaw, grip: OPEN, max: 30 });
+        self.ops.push(Op::Yaw {
+            yaw: self.yaw,
+            grip: OPEN,
+            max: 30,
+        });
         let at = [pre[0], pre[1], hp[2] - 0.002];
         self.mv(Target::Grip(Point::Abs(at)), 0.005, 40, 10.0);
-        self.ops.push(Op::Grip { cmd: CLOSE, steps: 10 });
+        self.ops.push(Op::Grip {
+            cmd: CLOSE,
+            steps: 10,
+        });
         self.held = None;
         let pull = 0.158 + q0;
         let dst = add(at, [out[0] * pull, out[1] * pull, 0.0]);
@@ -507,16 +703,26 @@ impl<'a> Builder<'a> {
             gain: 10.0,
             until_pending: false,
         });
-        self.ops.push(Op::Grip { cmd: OPEN, steps: 8 });
+        self.ops.push(Op::Grip {
+            cmd: OPEN,
+            steps: 8,
+        });
         self.mv(Target::Rel([0.0, 0.0, 0.08]), 0.015, 30, 12.0);
         self.yaw = 0.0;
-        self.ops.push(Op::Yaw { yaw: 0.0, grip: OPEN, max: 30 });
+        self.ops.push(Op::Yaw {
+            yaw: 0.0,
+            grip: OPEN,
+            max: 30,
+        });
     }
 
     /// Turn a stove knob on by pushing its pointer bar around the axis with the closed fingers.
     fn turn_knob(&mut self, stove: usize) {
         let b = self.scene.instances[stove].root_body;
-        let Some(knob) = self.scene.model.id(ObjType::Body, &format!("{}_knob", self.scene.instances[stove].name)) else {
+        let Some(knob) = self.scene.model.id(
+            ObjType::Body,
+            &format!("{}_knob", self.scene.instances[stove].name),
+        ) else {
             return;
         };
         let _ = b;
@@ -528,11 +734,19 @@ impl<'a> Builder<'a> {
         let z = c[2] + 0.030;
         // Fingers closed throughout (grip_now() follows `held`).
         self.held = Some(stove);
-        self.ops.push(Op::Grip { cmd: CLOSE, steps: 0 });
+        self.ops.push(Op::Grip {
+            cmd: CLOSE,
+            steps: 0,
+        });
         let start = qrot(q, [0.024, yb, 0.0]);
         let pre = [c[0] + start[0], c[1] + start[1], z + 0.06];
         self.mv(Target::Grip(Point::Abs(pre)), 0.015, 80, 12.0);
-        self.mv(Target::Grip(Point::Abs([pre[0], pre[1], z])), 0.005, 30, 10.0);
+        self.mv(
+            Target::Grip(Point::Abs([pre[0], pre[1], z])),
+            0.005,
+            30,
+            10.0,
+        );
         let end = qrot(q, [-0.03, yb, 0.0]);
         self.ops.push(Op::Move {
             target: Target::Grip(Point::Abs([c[0] + end[0], c[1] + end[1], z])),
@@ -550,7 +764,14 @@ impl<'a> Builder<'a> {
 /// The ±y side of `obj` whose neighbourhood is freer: the hand (20 cm long along y) reaches past the
 /// grasp point on that side, so fixtures and other objects there are scored by clearance (seeded
 /// tie-break).
-pub(super) fn clear_side(scene: &Scene, env: &Env, obj: usize, p: [f64; 3], r: f64, coin: bool) -> f64 {
+pub(super) fn clear_side(
+    scene: &Scene,
+    env: &Env,
+    obj: usize,
+    p: [f64; 3],
+    r: f64,
+    coin: bool,
+) -> f64 {
     let mut best = [f64::MAX; 2];
     for (s, side) in [1.0, -1.0].iter().enumerate() {
         for reach in [r, r + 0.06, r + 0.1] {
@@ -597,18 +818,13 @@ pub(super) fn clear_side(scene: &Scene, env: &Env, obj: usize, p: [f64; 3], r: f
         }
     }
     if (best[0] - best[1]).abs() < 0.02 || best[0].min(best[1]) > 0.08 {
-        if coin {
-            1.0
-        } else {
-            -1.0
-        }
+        if coin { 1.0 } else { -1.0 }
     } else if best[0] > best[1] {
         1.0
     } else {
         -1.0
     }
 }
-
 
 /// The Panda's shoulder (joint 2 axis) in the world.
 pub(super) const SHOULDER: [f64; 3] = [-0.66, 0.0, 1.245];
