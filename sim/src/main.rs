@@ -470,7 +470,8 @@ fn expert_eval(
             s.push_str(r);
             s.push('\n');
         }
-        s.push_str(&format!("\nThroughput: {thr}.\n"));
+        s.push_str(&format!("\nThroughput: {thr}.\n\n"));
+        s.push_str(sim::expert::NOTES);
         std::fs::write(&md, s).with_context(|| format!("writing {}", md.display()))?;
     }
     Ok(())
