@@ -7,6 +7,7 @@
 
 pub mod controller;
 pub mod env;
+pub mod expert;
 pub mod mujoco;
 pub mod render;
 pub mod robot;

@@ -73,6 +73,27 @@ enum Command {
         #[arg(long, value_enum, default_value = "fast")]
         quality: Quality,
     },
+    /// Run the scripted expert (rendering off) and print per-task success and episode lengths.
+    ExpertEval {
+        /// `all`, `mem`, `goal`, or a task id (`t3`, `t3@12`, `libero_goal/<name>`); comma-separated.
+        #[arg(long, default_value = "all")]
+        task: String,
+        /// Episodes per task (seeds seed, seed+1, …).
+        #[arg(long, default_value_t = 50)]
+        episodes: usize,
+        /// First seed.
+        #[arg(long, default_value_t = 0)]
+        seed: u64,
+        /// Repetitions for the repetition family (`t3 --repeat 12` = `t3@12`).
+        #[arg(long)]
+        repeat: Option<usize>,
+        /// Also write the table as Markdown to this file.
+        #[arg(long)]
+        markdown: Option<PathBuf>,
+        /// Print every episode.
+        #[arg(long)]
+        verbose: bool,
+    },
     /// Measure physics, rendering and Env throughput.
     Bench {
         /// Print one JSON object instead of a table.
@@ -163,6 +184,14 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             );
             Ok(())
         }
+        Command::ExpertEval {
+            task,
+            episodes,
+            seed,
+            repeat,
+            markdown,
+            verbose,
+        } => expert_eval(&task, episodes, seed, repeat, markdown, verbose),
         Command::Tasks => {
             println!("{:<58} {:>4} {:>6}  instruction", "id", "goal", "steps");
             for t in sim::task::list() {
@@ -315,4 +344,135 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             Ok(())
         }
     }
+}
+
+fn expert_eval(
+    task: &str,
+    episodes: usize,
+    seed: u64,
+    repeat: Option<usize>,
+    markdown: Option<PathBuf>,
+    verbose: bool,
+) -> anyhow::Result<()> {
+    if episodes == 0 {
+        return Err(BadInput("--episodes must be at least 1".into()).into());
+    }
+    if let Some(md) = &markdown {
+        check_out_dir(md)?;
+    }
+    let mut tasks = Vec::new();
+    for t in task.split(',') {
+        match t {
+            "all" => tasks.extend(sim::task::list()),
+            "mem" | "goal" => tasks.extend(sim::task::list().into_iter().filter(|s| {
+                s.id.starts_with(if t == "mem" {
+                    "libero_mem"
+                } else {
+                    "libero_goal"
+                })
+            })),
+            id => {
+                let spec = match repeat {
+                    Some(n) => sim::task::resolve_with_repeats(id, n),
+                    None => sim::task::resolve(id),
+                }
+                .map_err(|e| BadInput(e.to_string()))?;
+                tasks.push(spec);
+            }
+        }
+    }
+    let cfg = sim::expert::ExpertConfig::default();
+    let header = format!(
+        "| {:<54} | {:>4} | {:>8} | {:>6} | {:>9} | {:>8} | {:>6} | {:>6} |",
+        "task", "goal", "episodes", "success", "tiered", "mean len", "max len", "budget"
+    );
+    let rule = format!(
+        "|{}|{}|{}|{}|{}|{}|{}|{}|",
+        "-".repeat(56),
+        "-".repeat(6),
+        "-".repeat(10),
+        "-".repeat(9),
+        "-".repeat(11),
+        "-".repeat(10),
+        "-".repeat(9),
+        "-".repeat(8)
+    );
+    println!("{header}\n{rule}");
+    let mut rows = Vec::new();
+    let t0 = std::time::Instant::now();
+    let (mut total_eps, mut total_steps) = (0usize, 0usize);
+    for spec in &tasks {
+        let mut env = Env::from_task(
+            spec,
+            EnvConfig {
+                render: false,
+                ..EnvConfig::default()
+            },
+        )
+        .map_err(classify)?;
+        let (mut ok, mut lens, mut tiered) = (0usize, Vec::new(), 0.0);
+        for k in 0..episodes {
+            let s = seed + k as u64;
+            let r = sim::expert::run_episode_in(&mut env, spec, s, &cfg)
+                .with_context(|| format!("{} seed {s}", spec.id))?;
+            if verbose {
+                eprintln!(
+                    "{} seed {s}: success {} steps {} tiered {:.2} ({})",
+                    spec.id, r.success, r.steps, r.tiered, r.end
+                );
+            }
+            ok += r.success as usize;
+            tiered += r.tiered;
+            lens.push(r.steps);
+            total_steps += r.steps;
+        }
+        total_eps += episodes;
+        let mean = lens.iter().sum::<usize>() as f64 / lens.len() as f64;
+        let max = lens.iter().copied().max().unwrap_or(0);
+        let row = format!(
+            "| {:<54} | {:>4} | {:>8} | {:>6.1}% | {:>9.3} | {:>8.1} | {:>7} | {:>6} |",
+            spec.id,
+            spec.goal_len,
+            episodes,
+            100.0 * ok as f64 / episodes as f64,
+            tiered / episodes as f64,
+            mean,
+            max,
+            spec.max_steps
+        );
+        println!("{row}");
+        rows.push(row);
+    }
+    let secs = t0.elapsed().as_secs_f64();
+    let thr = format!(
+        "{total_eps} episodes, {total_steps} steps in {secs:.1} s: {:.1} episodes/min, {:.0} steps/s (one thread, rendering off)",
+        total_eps as f64 * 60.0 / secs,
+        total_steps as f64 / secs
+    );
+    println!("\n{thr}");
+    if let Some(md) = markdown {
+        let mut s = String::new();
+        s.push_str("# Scripted expert: success and episode lengths\n\n");
+        s.push_str(&format!(
+            "Regenerate with `cargo run --release -p sim -- expert-eval --task {task} --episodes {episodes} --seed {seed}{} --markdown {}`.\n\n",
+            repeat.map(|n| format!(" --repeat {n}")).unwrap_or_default(),
+            md.display()
+        ));
+        s.push_str(&format!(
+            "Seeds {seed}..{}; success = the goal tracker reports done (and no over-repetition) when the expert finishes; tiered = mean satisfied/goal length; lengths in control steps (20 Hz) including the final hold; budget = the task's step limit.\n\n",
+            seed + episodes as u64 - 1
+        ));
+        s.push_str(&header);
+        s.push('\n');
+        s.push_str(&rule);
+        s.push('\n');
+        for r in &rows {
+            s.push_str(r);
+            s.push('\n');
+        }
+        s.push_str(&format!("\nThroughput: {thr}.\n\n"));
+        s.push_str(sim::expert::NOTES);
+        std::fs::write(&md, s).with_context(|| format!("writing {}", md.display()))?;
+    }
+    Ok(())
 }

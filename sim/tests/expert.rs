@@ -1,0 +1,92 @@
+//! The scripted expert: succeeds within budget on representative tasks, is deterministic per seed, and
+//! only ever emits actions in [−1, 1]. Rendering is off; a handful of short episodes in total.
+
+use sim::expert::{Expert, ExpertConfig, run_episode, subgoal_branches};
+use sim::task::registry;
+use sim::{Env, EnvConfig};
+
+fn state_only() -> EnvConfig {
+    EnvConfig {
+        render: false,
+        ..EnvConfig::default()
+    }
+}
+
+/// Every action of one episode (at most `limit` steps).
+fn actions(task: &str, seed: u64, limit: usize) -> Vec<[f32; 7]> {
+    let spec = registry::resolve(task).unwrap();
+    let mut env = Env::from_task(&spec, state_only()).unwrap();
+    let mut obs = env.reset(seed).unwrap();
+    let mut ex = Expert::new(&spec, seed);
+    let mut out = Vec::new();
+    while out.len() < limit {
+        let Some(a) = ex.act(&env, &obs) else { break };
+        out.push(a);
+        obs = env.step(&a).unwrap();
+    }
+    out
+}
+
+#[test]
+fn t1_succeeds_within_budget() {
+    let spec = registry::resolve("t1").unwrap();
+    for seed in [0, 1] {
+        let r = run_episode(&spec, seed, &ExpertConfig::default()).unwrap();
+        assert!(r.success, "t1 seed {seed}: {r:?}");
+        assert!(r.steps <= spec.max_steps, "t1 seed {seed}: {r:?}");
+        assert_eq!(r.tiered, 1.0);
+    }
+}
+
+#[test]
+fn a_libero_goal_task_succeeds_within_budget() {
+    let spec = registry::resolve("libero_goal/put_the_bowl_on_the_plate").unwrap();
+    for seed in [0, 1] {
+        let r = run_episode(&spec, seed, &ExpertConfig::default()).unwrap();
+        assert!(r.success, "seed {seed}: {r:?}");
+        assert!(r.steps <= spec.max_steps, "seed {seed}: {r:?}");
+    }
+}
+
+#[test]
+fn same_seed_same_actions_and_seeds_differ() {
+    let a = actions("t1", 3, 80);
+    let b = actions("t1", 3, 80);
+    assert_eq!(a.len(), 80);
+    assert_eq!(a, b, "same seed must give the same action sequence");
+    let c = actions("t1", 4, 80);
+    assert_ne!(a, c, "different seeds should give different demonstrations");
+}
+
+#[test]
+fn actions_stay_in_range_and_the_gripper_closes_before_lifting() {
+    let acts = actions("t1", 2, 400);
+    assert!(!acts.is_empty());
+    for a in &acts {
+        for v in a {
+            assert!(v.is_finite() && (-1.0..=1.0).contains(v), "{a:?}");
+        }
+    }
+    // The first closing command is followed by at least 8 consecutive closing steps (a full swing)
+    // before any upward motion.
+    let first_close = acts.iter().position(|a| a[6] > 0.0).expect("closes");
+    let closing = acts[first_close..]
+        .iter()
+        .take_while(|a| a[6] > 0.0 && a[2] <= 0.0)
+        .count();
+    assert!(
+        closing >= 8,
+        "gripper closed for only {closing} steps before lifting"
+    );
+}
+
+#[test]
+fn or_goals_expose_their_branches() {
+    let t7 = registry::resolve("t7").unwrap();
+    let b = subgoal_branches(&t7.problem.goal);
+    assert_eq!(b.len(), 2);
+    assert!(b.iter().all(|s| s.len() == 3));
+    let t3 = registry::resolve("t3@4").unwrap();
+    let b = subgoal_branches(&t3.problem.goal);
+    assert_eq!((b.len(), b[0].len()), (1, 4));
+}
