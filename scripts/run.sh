@@ -1,14 +1,16 @@
 #!/usr/bin/env bash
-# The main job on the built-in defaults. Today the furthest step that works end to end is the simulator:
-# print the MuJoCo/GL set-up, reset the LIBERO tabletop scene, render both cameras, and measure throughput.
-# (generate → train → eval on the tiny config replaces this as those crates land.)
+# The main job on the built-in defaults: set-up, the simulator's self-check, then the furthest chain that
+# works end to end today — generate expert demonstrations of T1, train the tiny config on them, and print
+# the subgoal table of a closed-loop evaluation (the zero sanity policy until `eval` loads checkpoints).
+# Everything builds in the dev profile (dependencies optimised), shared with `scripts/test.sh`.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 bash scripts/setup.sh
 mkdir -p out
-cargo build -q --release -p sim
-SIM=target/release/sim
-"$SIM" info
-"$SIM" render --out out/agentview.png --camera agentview --size 128 --seed 0
-"$SIM" render --out out/eye_in_hand.png --camera robot0_eye_in_hand --size 128 --seed 0
-"$SIM" bench
+cargo build -q -p sim -p train -p eval
+BIN=target/debug
+"$BIN/sim" info
+"$BIN/sim" render --out out/agentview.png --task t1 --seed 0 --size 128
+"$BIN/sim" generate --task t1 --episodes 6 --val 1 --seed 0 --out datasets/tiny --workers 2
+"$BIN/train" configs/tiny.toml --run-dir runs/tiny
+"$BIN/eval" --tasks t1 --episodes 2 --policy zero --out runs/tiny/eval

@@ -16,6 +16,7 @@ pub mod task;
 pub use env::{Env, EnvConfig, EnvError, GoalStatus, Observation};
 pub mod assets;
 pub mod bench;
+pub mod generate;
 pub mod predicates;
 pub mod record;
 pub mod scene;

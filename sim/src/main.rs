@@ -34,6 +34,30 @@ enum Command {
     Info,
     /// List the shipped tasks (id, goal length, step budget, instruction).
     Tasks,
+    /// Record scripted-expert demonstrations as mcap episodes and write the dataset index.
+    Generate {
+        /// Task id, or `all` (then one subfolder per task under --out).
+        #[arg(long)]
+        task: String,
+        /// Episodes in total (train + validation).
+        #[arg(long, default_value_t = 120)]
+        episodes: usize,
+        /// Of which validation.
+        #[arg(long, default_value_t = 20)]
+        val: usize,
+        /// Base seed.
+        #[arg(long, default_value_t = 0)]
+        seed: u64,
+        /// Output dataset folder.
+        #[arg(long)]
+        out: PathBuf,
+        /// Worker threads (one simulator each).
+        #[arg(long, default_value_t = 1)]
+        workers: usize,
+        /// Camera image side.
+        #[arg(long, default_value_t = 128)]
+        size: usize,
+    },
     /// Render the agentview of every shipped task at one seed into a labelled contact sheet.
     Sheet {
         /// Output PNG path.
@@ -192,6 +216,67 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             markdown,
             verbose,
         } => expert_eval(&task, episodes, seed, repeat, markdown, verbose),
+        Command::Generate {
+            task,
+            episodes,
+            val,
+            seed,
+            out,
+            workers,
+            size,
+        } => {
+            let tasks = if task == "all" {
+                sim::task::list()
+            } else {
+                vec![sim::task::resolve(&task).map_err(|e| BadInput(e.to_string()))?]
+            };
+            let cfg = sim::generate::GenerateConfig {
+                episodes,
+                val,
+                seed,
+                workers,
+                image_size: size,
+                ..Default::default()
+            };
+            for t in &tasks {
+                let dir = if tasks.len() > 1 {
+                    out.join(t.id.replace('/', "_"))
+                } else {
+                    out.clone()
+                };
+                let bar = indicatif::ProgressBar::new(episodes as u64);
+                bar.set_style(
+                    indicatif::ProgressStyle::with_template(
+                        "{prefix} {bar:30} {pos}/{len} episodes  {msg}  ETA {eta}",
+                    )
+                    .expect("valid template"),
+                );
+                bar.set_prefix(t.id.clone());
+                let start = std::time::Instant::now();
+                let index = sim::generate::generate(t, &dir, &cfg, &|p| {
+                    bar.set_position(p.done as u64);
+                    bar.set_message(format!(
+                        "{} ok, {} failed attempts",
+                        p.successes, p.failures
+                    ));
+                })
+                .map_err(|e| match e {
+                    sim::generate::GenerateError::Argument(m) => anyhow::Error::new(BadInput(m)),
+                    other => other.into(),
+                })?;
+                bar.finish_and_clear();
+                let steps: usize = index.episodes.iter().map(|e| e.length).sum();
+                println!(
+                    "{}: {} episodes ({} steps) in {} in {:.1} s",
+                    t.id,
+                    index.episodes.len(),
+                    steps,
+                    dir.display(),
+                    start.elapsed().as_secs_f64()
+                );
+            }
+            Ok(())
+        }
         Command::Tasks => {
             println!("{:<58} {:>4} {:>6}  instruction", "id", "goal", "steps");
             for t in sim::task::list() {

@@ -1,0 +1,231 @@
+//! Dataset generation: scripted-expert demonstrations recorded as mcap episodes plus the dataset index.
+//!
+//! Episode `k` of a dataset is `episode_{k:05}.mcap`. Its seed is derived from the base seed, `k` and the
+//! attempt number; an attempt the expert fails is discarded (the recorder's temporary file vanishes) and the
+//! next attempt's seed is tried, so the same base seed always gives the same files, byte for byte. A file
+//! appears under its final name only once complete, so a rerun skips finished episodes and never mistakes a
+//! killed run's leftovers for an episode.
+
+use std::path::{Path, PathBuf};
+use std::sync::Mutex;
+use std::sync::atomic::{AtomicUsize, Ordering};
+
+use crate::env::{Env, EnvConfig};
+use crate::expert::Expert;
+use crate::record::{RecordError, Recorder};
+use crate::task::TaskSpec;
+
+/// Attempts per episode before giving up.
+pub const MAX_ATTEMPTS: u64 = 8;
+/// Steps recorded after the goal is done (a short hold), when the expert has not stopped by then.
+pub const HOLD_STEPS: usize = 10;
+
+/// Errors from generation.
+#[derive(Debug, thiserror::Error)]
+pub enum GenerateError {
+    /// The simulator failed.
+    #[error(transparent)]
+    Env(#[from] crate::env::EnvError),
+    /// Writing an episode failed.
+    #[error(transparent)]
+    Record(#[from] RecordError),
+    /// Building the index failed.
+    #[error(transparent)]
+    Data(#[from] data::DataError),
+    /// The expert failed every attempt of one episode.
+    #[error("{task}: the expert failed all {MAX_ATTEMPTS} attempts of episode {episode}")]
+    Expert {
+        /// Task id.
+        task: String,
+        /// Episode index.
+        episode: usize,
+    },
+    /// Bad arguments.
+    #[error("{0}")]
+    Argument(String),
+}
+
+/// What to generate.
+#[derive(Debug, Clone)]
+pub struct GenerateConfig {
+    /// Episodes in total (train + validation).
+    pub episodes: usize,
+    /// Of which validation.
+    pub val: usize,
+    /// Base seed.
+    pub seed: u64,
+    /// Worker threads (one simulator each).
+    pub workers: usize,
+    /// Camera image side.
+    pub image_size: usize,
+    /// Episode writer options (image compression, chunking).
+    pub writer: data::WriterOptions,
+}
+
+impl Default for GenerateConfig {
+    fn default() -> Self {
+        GenerateConfig {
+            episodes: 120,
+            val: 20,
+            seed: 0,
+            workers: 1,
+            image_size: 128,
+            writer: data::WriterOptions::default(),
+        }
+    }
+}
+
+/// Counters reported while generating.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct GenerateProgress {
+    /// Episodes complete (written now or found from an earlier run).
+    pub done: usize,
+    /// Expert attempts that succeeded.
+    pub successes: usize,
+    /// Expert attempts that failed (discarded).
+    pub failures: usize,
+}
+
+/// Path of episode `k` in `dir`.
+pub fn episode_path(dir: &Path, k: usize) -> PathBuf {
+    dir.join(format!("episode_{k:05}.mcap"))
+}
+
+/// Seed of attempt `attempt` of episode `k` (SplitMix64 over the three).
+pub fn attempt_seed(seed: u64, k: u64, attempt: u64) -> u64 {
+    let mut z = seed
+        .wrapping_mul(0x9E37_79B9_7F4A_7C15)
+        .wrapping_add(k.wrapping_mul(0xD1B5_4A32_D192_ED03))
+        .wrapping_add(attempt.wrapping_mul(0x8CB9_2BA7_2F3D_8DD7));
+    z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+    z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+    z ^ (z >> 31)
+}
+
+/// Records one expert episode to `path`; `Ok(false)` (and no file) when the expert fails.
+pub fn record_episode(
+    env: &mut Env,
+    task: &TaskSpec,
+    seed: u64,
+    path: &Path,
+    writer: data::WriterOptions,
+) -> Result<bool, GenerateError> {
+    let mut obs = env.reset(seed)?;
+    let mut expert = Expert::new(task, seed);
+    let mut rec = Recorder::create(path, env, task, seed, writer)?;
+    let mut after_done = 0;
+    for _ in 0..task.max_steps {
+        let Some(action) = expert.act(env, &obs) else {
+            break;
+        };
+        let next = env.step(&action)?;
+        rec.record(env, &obs, action, &next)?;
+        obs = next;
+        let g = obs
+            .goal
+            .as_ref()
+            .expect("task environments report goal progress");
+        if g.done {
+            after_done += 1;
+            if after_done > HOLD_STEPS {
+                break;
+            }
+        }
+    }
+    let g = obs
+        .goal
+        .as_ref()
+        .expect("task environments report goal progress");
+    if g.done && !g.failed {
+        rec.finish()?;
+        Ok(true)
+    } else {
+        Ok(false)
+    }
+}
+
+/// Generates `cfg.episodes` episodes of `task` into `dir` (skipping finished ones) and writes the index.
+pub fn generate(
+    task: &TaskSpec,
+    dir: &Path,
+    cfg: &GenerateConfig,
+    on_progress: &(dyn Fn(GenerateProgress) + Sync),
+) -> Result<data::DatasetIndex, GenerateError> {
+    if cfg.episodes == 0 || cfg.val >= cfg.episodes || cfg.workers == 0 {
+        return Err(GenerateError::Argument(format!(
+            "need episodes ≥ 1, val < episodes and workers ≥ 1 (got {} episodes, {} val, {} workers)",
+            cfg.episodes, cfg.val, cfg.workers
+        )));
+    }
+    std::fs::create_dir_all(dir).map_err(|e| data::DataError::io(dir, e))?;
+    let progress = Mutex::new(GenerateProgress::default());
+    let next = AtomicUsize::new(0);
+    let report = |f: &dyn Fn(&mut GenerateProgress)| {
+        let mut p = progress.lock().expect("no worker panicked");
+        f(&mut p);
+        on_progress(*p);
+    };
+    std::thread::scope(|s| -> Result<(), GenerateError> {
+        let workers: Vec<_> = (0..cfg.workers.min(cfg.episodes))
+            .map(|_| {
+                s.spawn(|| -> Result<(), GenerateError> {
+                    let mut env: Option<Env> = None;
+                    loop {
+                        let k = next.fetch_add(1, Ordering::SeqCst);
+                        if k >= cfg.episodes {
+                            return Ok(());
+                        }
+                        let path = episode_path(dir, k);
+                        if path.exists() {
+                            report(&|p| p.done += 1);
+                            continue;
+                        }
+                        if env.is_none() {
+                            env = Some(Env::from_task(
+                                task,
+                                EnvConfig {
+                                    image_size: cfg.image_size,
+                                    segmentation: true,
+                                    ..EnvConfig::default()
+                                },
+                            )?);
+                        }
+                        let env = env.as_mut().expect("just built");
+                        let mut ok = false;
+                        for attempt in 0..MAX_ATTEMPTS {
+                            let seed = attempt_seed(cfg.seed, k as u64, attempt);
+                            if record_episode(env, task, seed, &path, cfg.writer.clone())? {
+                                report(&|p| {
+                                    p.successes += 1;
+                                    p.done += 1;
+                                });
+                                ok = true;
+                                break;
+                            }
+                            report(&|p| p.failures += 1);
+                        }
+                        if !ok {
+                            return Err(GenerateError::Expert {
+                                task: task.id.clone(),
+                                episode: k,
+                            });
+                        }
+                    }
+                })
+            })
+            .collect();
+        for w in workers {
+            w.join().expect("worker panicked")?;
+        }
+        Ok(())
+    })?;
+    let index = data::build_index(
+        dir,
+        &data::IndexOptions {
+            val_fraction: cfg.val as f64 / cfg.episodes as f64,
+            seed: cfg.seed,
+        },
+    )?;
+    index.save(dir)?;
+    Ok(index)
+}
