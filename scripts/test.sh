@@ -1,5 +1,6 @@
 #!/usr/bin/env bash
 # The whole test suite: set-up, then every crate's tests (dev profile; dependencies are built optimised).
+# Ends with one summary line over all test binaries: "N passed, N failed".
 set -euo pipefail
 cd "$(dirname "$0")/.."
 bash scripts/setup.sh
@@ -10,4 +11,9 @@ if ! "$venv/bin/python" -c "import mcap, mcap_protobuf, zstandard" 2>/dev/null; 
   "$venv/bin/pip" install -q "mcap==1.6.0" "mcap-protobuf-support==0.6.0" "zstandard==0.25.0"
 fi
 export DATA_MCAP_PYTHON="$PWD/$venv/bin/python"
-cargo test --workspace --features data/burn --no-fail-fast 2>&1
+log=$(mktemp)
+trap 'rm -f "$log"' EXIT
+status=0
+cargo test --workspace --features data/burn --no-fail-fast 2>&1 | tee "$log" || status=$?
+awk '/^test result:/ { p += $4; f += $6 } END { printf "%d passed, %d failed\n", p, f }' "$log"
+exit "$status"
