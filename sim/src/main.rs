@@ -162,6 +162,20 @@ fn classify(e: EnvError) -> anyhow::Error {
     }
 }
 
+/// Resets a freshly built environment from `seed` and renders `camera` at `size`².
+fn render_start(
+    env: Result<Env, EnvError>,
+    seed: u64,
+    camera: &str,
+    size: usize,
+) -> anyhow::Result<sim::render::Frame> {
+    let mut env = env.map_err(classify)?;
+    env.reset(seed).map_err(classify)?;
+    let (r, data) = env.renderer_mut().context("rendering is off")?;
+    r.render_named(data, camera, size, Channels::RGB)
+        .map_err(|e| classify(e.into()))
+}
+
 fn check_out_dir(out: &std::path::Path) -> anyhow::Result<()> {
     if let Some(dir) = out.parent().filter(|d| !d.as_os_str().is_empty())
         && !dir.is_dir()
@@ -301,20 +315,12 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             check_out_dir(&out)?;
             let mut tiles = Vec::new();
             for t in sim::task::list() {
-                let mut env = Env::from_task(
-                    &t,
-                    EnvConfig {
-                        image_size: size,
-                        ..EnvConfig::default()
-                    },
-                )
-                .map_err(classify)?;
-                env.reset(seed)
-                    .with_context(|| format!("resetting {}", t.id))?;
-                let (r, data) = env.renderer_mut().context("rendering is off")?;
-                let frame = r
-                    .render_named(data, &camera, size, Channels::RGB)
-                    .map_err(|e| classify(e.into()))?;
+                let cfg = EnvConfig {
+                    image_size: size,
+                    ..EnvConfig::default()
+                };
+                let frame = render_start(Env::from_task(&t, cfg), seed, &camera, size)
+                    .with_context(|| format!("rendering {}", t.id))?;
                 tiles.push((
                     t.id.replace("libero_goal/", "goal/")
                         .replace("libero_mem/", "mem/"),
@@ -354,19 +360,12 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             let frame = match (task, mjcf) {
                 (Some(id), _) => {
                     let spec = sim::task::resolve(&id).map_err(|e| BadInput(e.to_string()))?;
-                    let mut env = Env::from_task(
-                        &spec,
-                        EnvConfig {
-                            image_size: size,
-                            quality,
-                            ..EnvConfig::default()
-                        },
-                    )
-                    .map_err(classify)?;
-                    env.reset(seed).map_err(classify)?;
-                    let (r, data) = env.renderer_mut().context("rendering is off")?;
-                    r.render_named(data, &camera, size, Channels::RGB)
-                        .map_err(|e| classify(e.into()))?
+                    let cfg = EnvConfig {
+                        image_size: size,
+                        quality,
+                        ..EnvConfig::default()
+                    };
+                    render_start(Env::from_task(&spec, cfg), seed, &camera, size)?
                 }
                 (None, Some(path)) => {
                     let model = std::sync::Arc::new(
@@ -381,16 +380,12 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                         .map_err(|e| classify(e.into()))?
                 }
                 (None, None) => {
-                    let mut env = Env::new(EnvConfig {
+                    let cfg = EnvConfig {
                         image_size: size,
                         quality,
                         ..EnvConfig::default()
-                    })
-                    .map_err(classify)?;
-                    env.reset(seed).map_err(classify)?;
-                    let (r, data) = env.renderer_mut().context("rendering is off")?;
-                    r.render_named(data, &camera, size, Channels::RGB)
-                        .map_err(|e| classify(e.into()))?
+                    };
+                    render_start(Env::new(cfg), seed, &camera, size)?
                 }
             };
             save_png(&frame, &out).with_context(|| format!("writing {}", out.display()))?;
