@@ -110,7 +110,7 @@ impl OscPose {
             q0[i] = data.qpos()[ids.arm_qpos[i]];
         }
         let site = ids.grip_site;
-        let mut c = OscPose {
+        OscPose {
             goal_pos: Vector3::from(data.site_pos(site)),
             goal_ori: Matrix3::from_row_slice(&data.site_mat(site)),
             q0,
@@ -119,9 +119,7 @@ impl OscPose {
             jacp: vec![0.0; 3 * nv],
             jacr: vec![0.0; 3 * nv],
             mass: vec![0.0; nv * nv],
-        };
-        c.goal_pos = Vector3::from(data.site_pos(c.ids.grip_site));
-        c
+        }
     }
 
     /// Current goal position.

@@ -145,7 +145,7 @@ enum World {
 }
 
 /// Goal progress reported with each observation of a task environment.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, Default)]
 pub struct GoalStatus {
     /// Satisfied subgoals.
     pub satisfied: usize,

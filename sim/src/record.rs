@@ -137,14 +137,7 @@ impl Recorder {
                 self.touches[i] += 1;
             }
         }
-        let goal = next.goal.clone().unwrap_or(crate::env::GoalStatus {
-            satisfied: 0,
-            goal_len: 0,
-            done: false,
-            failed: false,
-            pending: None,
-            satisfied_texts: Vec::new(),
-        });
+        let goal = next.goal.clone().unwrap_or_default();
         if goal.satisfied > self.satisfied_seen {
             let text = goal.satisfied_texts.last().cloned().unwrap_or_default();
             for (label, t) in self.labels.iter_mut().zip(&self.touches) {

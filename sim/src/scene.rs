@@ -692,7 +692,7 @@ impl Scene {
                 // we keep draws inside the region (1 mm margin) so every init relation holds.
                 let (x0, x1) = clip_range(x0, x1, rect[0], rect[2]);
                 let (y0, y1) = clip_range(y0, y1, rect[1], rect[3]);
-                let (bottom, top, foot) = true_extent(def.category);
+                let (bottom, _, foot) = true_extent(def.category);
                 let z = TABLE_TOP - bottom + 0.005;
                 const TRIES: usize = 5000;
                 for _ in 0..TRIES {
@@ -700,7 +700,7 @@ impl Scene {
                     let y = uniform(rng, y0, y1);
                     let ok = placed
                         .iter()
-                        .all(|p| !p.blocks(x, y, z, r, def.bottom_offset, foot, bottom, top));
+                        .all(|p| !p.blocks(x, y, z, r, def.bottom_offset, foot));
                     if ok {
                         let adr = inst.qpos_adr.expect("movable objects have a free joint");
                         let q = def.placement_quat;
@@ -778,18 +778,7 @@ impl Placed {
     }
 
     /// LIBERO's rule (xy distance ≤ r + r' and z − z' ≤ top' − bottom) or overlapping true footprints.
-    #[allow(clippy::too_many_arguments)]
-    fn blocks(
-        &self,
-        x: f64,
-        y: f64,
-        z: f64,
-        r: f64,
-        bottom_offset: f64,
-        foot: f64,
-        _bottom: f64,
-        _top: f64,
-    ) -> bool {
+    fn blocks(&self, x: f64, y: f64, z: f64, r: f64, bottom_offset: f64, foot: f64) -> bool {
         let d = ((x - self.x).powi(2) + (y - self.y).powi(2)).sqrt();
         let libero = self.radius > 0.0
             && d <= self.radius + r
