@@ -1,17 +1,40 @@
-//! Closed-loop evaluation: rollouts of a policy in the simulator with the LIBERO-Mem goal tracker, and the
-//! paper's tables — subgoal completion (tiered credit, Table 3) and success (Table 2) per task, with 95 %
-//! confidence intervals, mean steps and over-repetition failures.
+//! Closed-loop evaluation: rollouts of a policy in the simulator with the LIBERO-Mem goal tracker,
+//! and the paper's tables — subgoal completion (tiered credit, Table 3) and success (Table 2) per
+//! task, with 95 % confidence intervals, mean steps and over-repetition failures.
 //!
-//! Episode protocol (libero-mem-reference.md §4): reset from the episode seed (which includes LIBERO-Mem's
-//! 20 settle steps with the gripper opening), then up to the task's step budget of policy steps; the goal
-//! tracker is checked once per step. By default an episode ends as soon as it succeeds (every subgoal
-//! satisfied), as `eval_slotssm_raw.py` does; with `full_budget` it runs the whole budget like upstream's
-//! `mem_6`, where success also requires no over-repetition at the end.
+//! Episode protocol (libero-mem-reference.md §4): reset from the episode seed (which includes
+//! LIBERO-Mem's 20 settle steps with the gripper opening), then up to the task's step budget of
+//! policy steps; the goal tracker is checked once per step. By default an episode ends as soon as it
+//! succeeds (every subgoal satisfied), as `eval_slotssm_raw.py` does; with `full_budget` it runs the
+//! whole budget like upstream's `mem_6`, where success also requires no over-repetition at the end.
+//!
+//! ```no_run
+//! let tasks = eval::resolve_tasks("t1", None)?;
+//! let cfg = eval::EvalConfig { episodes: 2, ..Default::default() };
+//! let make = || -> Result<Box<dyn eval::Policy>, eval::EvalError> { Ok(Box::new(eval::ZeroPolicy)) };
+//! let results = eval::evaluate(&tasks, &make, &cfg, &|_| {})?;
+//! print!("{}", eval::report::markdown(&results.tasks));
+//! # Ok::<(), eval::EvalError>(())
+//! ```
 
-use rand::{Rng, SeedableRng};
-use rand_chacha::ChaCha8Rng;
+#![warn(missing_docs)]
+
+pub mod policy;
+pub mod report;
+pub mod run;
+pub mod viz;
+
+use std::path::{Path, PathBuf};
+use std::sync::Mutex;
+use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
+
+use sim::record::Recorder;
 use sim::task::TaskSpec;
 use sim::{Env, EnvConfig, Observation};
+
+pub use policy::{ExpertPolicy, ModelPolicy, Policy, RandomPolicy, ZeroPolicy};
+pub use report::{EpisodeResult, Results, TaskSummary, summarize, wilson};
+pub use run::RunDir;
 
 /// Errors from evaluation.
 #[derive(Debug, thiserror::Error)]
@@ -25,55 +48,46 @@ pub enum EvalError {
     /// Bad arguments.
     #[error("{0}")]
     Argument(String),
+    /// A run directory that cannot be evaluated (missing, no checkpoint, mismatched model).
+    #[error("{}: {message}", path.display())]
+    Run {
+        /// The offending file or directory.
+        path: PathBuf,
+        /// What is wrong.
+        message: String,
+    },
+    /// The model failed on an input.
+    #[error("model: {0}")]
+    Model(String),
+    /// A results file that cannot be read.
+    #[error("{}: {message}", path.display())]
+    Results {
+        /// The file.
+        path: PathBuf,
+        /// What is wrong.
+        message: String,
+    },
+    /// Writing a rollout recording or a visualisation failed.
+    #[error("{}: {message}", path.display())]
+    Output {
+        /// The file.
+        path: PathBuf,
+        /// What failed.
+        message: String,
+    },
 }
 
-/// Something that maps observations to actions, step by step.
-pub trait Policy {
-    /// Called before each episode with its seed.
-    fn reset(&mut self, task: &TaskSpec, seed: u64);
-    /// The next 7-D action.
-    fn act(&mut self, env: &Env, obs: &Observation) -> [f32; 7];
-    /// Whether the policy needs camera images (off: faster state-only rollouts).
-    fn needs_images(&self) -> bool;
-}
-
-/// Sends zeros with the gripper held: a floor for every table.
-#[derive(Debug, Default, Clone, Copy)]
-pub struct ZeroPolicy;
-
-impl Policy for ZeroPolicy {
-    fn reset(&mut self, _: &TaskSpec, _: u64) {}
-    fn act(&mut self, _: &Env, _: &Observation) -> [f32; 7] {
-        [0.0; 7]
-    }
-    fn needs_images(&self) -> bool {
-        false
-    }
-}
-
-/// Uniform random actions in [−1, 1] from the episode seed.
-#[derive(Debug, Clone)]
-pub struct RandomPolicy {
-    rng: ChaCha8Rng,
-}
-
-impl Default for RandomPolicy {
-    fn default() -> Self {
-        RandomPolicy {
-            rng: ChaCha8Rng::seed_from_u64(0),
+impl EvalError {
+    /// Process exit status for this error: 2 for bad input (arguments, tasks, run directories,
+    /// results files), 1 otherwise.
+    pub fn exit_code(&self) -> u8 {
+        match self {
+            EvalError::Task(_)
+            | EvalError::Argument(_)
+            | EvalError::Run { .. }
+            | EvalError::Results { .. } => 2,
+            _ => 1,
         }
-    }
-}
-
-impl Policy for RandomPolicy {
-    fn reset(&mut self, _: &TaskSpec, seed: u64) {
-        self.rng = ChaCha8Rng::seed_from_u64(seed ^ 0x0005_eed0_fa11);
-    }
-    fn act(&mut self, _: &Env, _: &Observation) -> [f32; 7] {
-        std::array::from_fn(|_| self.rng.random_range(-1.0f32..=1.0))
-    }
-    fn needs_images(&self) -> bool {
-        false
     }
 }
 
@@ -86,8 +100,16 @@ pub struct EvalConfig {
     pub seed: u64,
     /// Run the whole step budget instead of stopping at success.
     pub full_budget: bool,
-    /// Camera image side when the policy needs images.
+    /// Camera image side when the policy needs images (the side `sim generate` records).
     pub image_size: usize,
+    /// Worker threads, one simulator and one policy each.
+    pub workers: usize,
+    /// Record every rollout as an mcap episode under this directory (`<task>/episode_<k>.mcap`).
+    pub record: Option<PathBuf>,
+    /// Write slot-attention overlays of the first rollout (first task, episode 0) here.
+    pub viz: Option<PathBuf>,
+    /// Every how many steps a visualisation frame is written.
+    pub viz_every: usize,
 }
 
 impl Default for EvalConfig {
@@ -97,6 +119,10 @@ impl Default for EvalConfig {
             seed: 0,
             full_budget: false,
             image_size: 128,
+            workers: 1,
+            record: None,
+            viz: None,
+            viz_every: 4,
         }
     }
 }
@@ -112,60 +138,91 @@ pub fn episode_seed(seed: u64, k: u64) -> u64 {
     z ^ (z >> 31)
 }
 
-/// The outcome of one rollout.
-#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
-pub struct EpisodeResult {
-    /// Task id.
-    pub task: String,
-    /// Episode index within the task.
-    pub episode: usize,
-    /// Seed used for the reset.
-    pub seed: u64,
-    /// Policy steps taken.
-    pub steps: usize,
-    /// Satisfied subgoals.
-    pub satisfied: usize,
-    /// Goal length.
-    pub goal_len: usize,
-    /// Success (see the module docs for the two protocols).
-    pub success: bool,
-    /// Over-repetition after completion.
-    pub over_repetition: bool,
+/// A file-system-safe name for a task id (`libero_mem/t3@5` → `libero_mem-t3@5`).
+pub fn task_slug(id: &str) -> String {
+    id.chars()
+        .map(|c| {
+            if c.is_alphanumeric() || "_@.-".contains(c) {
+                c
+            } else {
+                '-'
+            }
+        })
+        .collect()
 }
 
-impl EpisodeResult {
-    /// Tiered credit in [0, 1].
-    pub fn tiered(&self) -> f64 {
-        self.satisfied as f64 / self.goal_len.max(1) as f64
-    }
+/// Extras of one rollout: a recording file and a visualisation folder.
+#[derive(Debug, Default, Clone)]
+pub struct RolloutOutputs {
+    /// Record the rollout to this mcap file.
+    pub record: Option<PathBuf>,
+    /// Write slot overlays into this folder.
+    pub viz: Option<PathBuf>,
+    /// Every how many steps an overlay is written.
+    pub viz_every: usize,
 }
 
-/// Runs episode `k` of `task` with `policy` in `env` (which must be built for `task`).
+fn goal(o: &Observation) -> Result<&sim::GoalStatus, EvalError> {
+    o.goal
+        .as_ref()
+        .ok_or_else(|| EvalError::Argument("the environment has no task goal".into()))
+}
+
+/// Runs episode `k` of `task` with `policy` in `env` (which must be built for `task`, rendering
+/// with segmentation when recording).
 pub fn run_episode(
     env: &mut Env,
     task: &TaskSpec,
     policy: &mut dyn Policy,
     cfg: &EvalConfig,
     k: usize,
+    out: &RolloutOutputs,
 ) -> Result<EpisodeResult, EvalError> {
     let seed = episode_seed(cfg.seed, k as u64);
-    policy.reset(task, seed);
+    policy.reset(task, seed)?;
     let mut obs = env.reset(seed)?;
-    let mut steps = 0;
-    let status = |o: &Observation| {
-        o.goal
-            .clone()
-            .expect("task environments report goal progress")
+    let mut recorder = match &out.record {
+        Some(path) => Some(
+            Recorder::create(path, env, task, seed, data::WriterOptions::default()).map_err(
+                |e| EvalError::Output {
+                    path: path.clone(),
+                    message: e.to_string(),
+                },
+            )?,
+        ),
+        None => None,
     };
-    let mut g = status(&obs);
+    let mut viz = match &out.viz {
+        Some(dir) => Some(viz::Writer::create(dir, out.viz_every.max(1))?),
+        None => None,
+    };
+    let mut steps = 0;
+    let mut g = goal(&obs)?.clone();
     while steps < task.max_steps {
         if !cfg.full_budget && g.satisfied >= g.goal_len {
             break;
         }
-        let a = policy.act(env, &obs);
-        obs = env.step(&a)?;
+        let a = policy.act(env, &obs)?;
+        if let Some(v) = viz.as_mut() {
+            v.frame(steps, &obs, policy)?;
+        }
+        let next = env.step(&a)?;
+        if let (Some(rec), Some(path)) = (recorder.as_mut(), out.record.as_ref()) {
+            rec.record(env, &obs, a, &next)
+                .map_err(|e| EvalError::Output {
+                    path: path.clone(),
+                    message: e.to_string(),
+                })?;
+        }
+        obs = next;
         steps += 1;
-        g = status(&obs);
+        g = goal(&obs)?.clone();
+    }
+    if let (Some(rec), Some(path)) = (recorder, out.record.as_ref()) {
+        rec.finish().map_err(|e| EvalError::Output {
+            path: path.clone(),
+            message: e.to_string(),
+        })?;
     }
     let success = if cfg.full_budget {
         g.done && !g.failed
@@ -184,145 +241,165 @@ pub fn run_episode(
     })
 }
 
-/// An environment configured for `policy`.
+/// An environment configured for `policy` (rendering only when it needs images or when recording).
 pub fn env_for(task: &TaskSpec, policy: &dyn Policy, cfg: &EvalConfig) -> Result<Env, EvalError> {
+    let record = cfg.record.is_some();
     Ok(Env::from_task(
         task,
         EnvConfig {
-            render: policy.needs_images(),
+            render: policy.needs_images() || record,
+            segmentation: record,
             image_size: cfg.image_size,
             ..EnvConfig::default()
         },
     )?)
 }
 
-/// Per-task summary row.
-#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
-pub struct TaskSummary {
-    /// Task id.
+/// Progress of [`evaluate`], reported after every episode.
+#[derive(Debug, Clone)]
+pub struct Progress {
+    /// Task of the episode just finished.
     pub task: String,
-    /// Episodes run.
-    pub episodes: usize,
-    /// Mean subgoal completion (tiered credit), percent.
+    /// Episodes finished over all tasks.
+    pub done: usize,
+    /// Episodes in all.
+    pub total: usize,
+    /// Mean subgoal completion (%) of the finished episodes of this task.
     pub completion: f64,
-    /// Half-width of the 95 % confidence interval of `completion` (normal approximation), percent.
-    pub completion_ci95: f64,
-    /// Success rate, percent.
-    pub success: f64,
-    /// 95 % Wilson interval of the success rate, percent.
-    pub success_ci95: [f64; 2],
-    /// Mean steps per episode.
-    pub mean_steps: f64,
-    /// Episodes that failed by over-repetition.
-    pub over_repetition: usize,
+    /// Successes among the finished episodes of this task.
+    pub successes: usize,
 }
 
-/// Summarises the episodes of one task.
-pub fn summarize(task: &str, eps: &[EpisodeResult]) -> TaskSummary {
-    let n = eps.len().max(1) as f64;
-    let tiered: Vec<f64> = eps.iter().map(EpisodeResult::tiered).collect();
-    let mean = tiered.iter().sum::<f64>() / n;
-    let var = if eps.len() > 1 {
-        tiered.iter().map(|t| (t - mean).powi(2)).sum::<f64>() / (n - 1.0)
-    } else {
-        0.0
-    };
-    let succ = eps.iter().filter(|e| e.success).count() as f64;
-    TaskSummary {
-        task: task.to_string(),
-        episodes: eps.len(),
-        completion: 100.0 * mean,
-        completion_ci95: 100.0 * 1.96 * (var / n).sqrt(),
-        success: 100.0 * succ / n,
-        success_ci95: wilson(succ, n).map(|v| 100.0 * v),
-        mean_steps: eps.iter().map(|e| e.steps as f64).sum::<f64>() / n,
-        over_repetition: eps.iter().filter(|e| e.over_repetition).count(),
-    }
-}
+/// Makes one policy per worker.
+pub type PolicyFactory<'a> = dyn Fn() -> Result<Box<dyn Policy>, EvalError> + Sync + 'a;
 
-/// 95 % Wilson score interval for `k` successes out of `n`.
-pub fn wilson(k: f64, n: f64) -> [f64; 2] {
-    if n <= 0.0 {
-        return [0.0, 1.0];
-    }
-    let z = 1.96f64;
-    let p = k / n;
-    let den = 1.0 + z * z / n;
-    let centre = (p + z * z / (2.0 * n)) / den;
-    let half = z * ((p * (1.0 - p) / n) + z * z / (4.0 * n * n)).sqrt() / den;
-    [(centre - half).max(0.0), (centre + half).min(1.0)]
-}
-
-/// A Markdown table of task rows plus the average row.
-pub fn markdown(rows: &[TaskSummary]) -> String {
-    let mut s = String::from(
-        "| task | episodes | subgoal completion % | success % (95 % CI) | mean steps | over-repetition |\n|---|---:|---:|---:|---:|---:|\n",
-    );
-    for r in rows {
-        s.push_str(&format!(
-            "| {} | {} | {:.1} ± {:.1} | {:.1} ({:.1}–{:.1}) | {:.1} | {} |\n",
-            r.task,
-            r.episodes,
-            r.completion,
-            r.completion_ci95,
-            r.success,
-            r.success_ci95[0],
-            r.success_ci95[1],
-            r.mean_steps,
-            r.over_repetition
+/// Runs `cfg.episodes` episodes of every task on `cfg.workers` threads (one simulator and one policy
+/// each, made by `make`), and summarises them. Episode k of a task always uses the same seed, so the
+/// results do not depend on the number of workers.
+pub fn evaluate(
+    tasks: &[TaskSpec],
+    make: &PolicyFactory,
+    cfg: &EvalConfig,
+    progress: &(dyn Fn(&Progress) + Sync),
+) -> Result<Results, EvalError> {
+    if cfg.episodes == 0 || cfg.workers == 0 {
+        return Err(EvalError::Argument(
+            "--episodes and --workers must be at least 1".into(),
         ));
     }
-    if rows.len() > 1 {
-        let n = rows.len() as f64;
-        s.push_str(&format!(
-            "| **average** | {} | {:.1} | {:.1} | {:.1} | {} |\n",
-            rows.iter().map(|r| r.episodes).sum::<usize>(),
-            rows.iter().map(|r| r.completion).sum::<f64>() / n,
-            rows.iter().map(|r| r.success).sum::<f64>() / n,
-            rows.iter().map(|r| r.mean_steps).sum::<f64>() / n,
-            rows.iter().map(|r| r.over_repetition).sum::<usize>()
-        ));
+    if let Some(dir) = &cfg.record {
+        for task in tasks {
+            let d = dir.join(task_slug(&task.id));
+            std::fs::create_dir_all(&d).map_err(|e| EvalError::Output {
+                path: d.clone(),
+                message: e.to_string(),
+            })?;
+        }
     }
-    s
+    let total = tasks.len() * cfg.episodes;
+    let done = AtomicUsize::new(0);
+    let mut rows = Vec::new();
+    let mut all = Vec::new();
+    for (ti, task) in tasks.iter().enumerate() {
+        let results = Mutex::new(Vec::new());
+        let next = AtomicUsize::new(0);
+        let stop = AtomicBool::new(false);
+        let worker = || -> Result<(), EvalError> {
+            let mut policy = make()?;
+            let mut env = env_for(task, policy.as_ref(), cfg)?;
+            loop {
+                let k = next.fetch_add(1, Ordering::SeqCst);
+                if k >= cfg.episodes || stop.load(Ordering::SeqCst) {
+                    return Ok(());
+                }
+                let outputs = RolloutOutputs {
+                    record: cfg.record.as_ref().map(|d| {
+                        d.join(task_slug(&task.id))
+                            .join(format!("episode_{k:06}.mcap"))
+                    }),
+                    viz: cfg.viz.clone().filter(|_| ti == 0 && k == 0),
+                    viz_every: cfg.viz_every,
+                };
+                let r = run_episode(&mut env, task, policy.as_mut(), cfg, k, &outputs);
+                let r = match r {
+                    Ok(r) => r,
+                    Err(e) => {
+                        stop.store(true, Ordering::SeqCst);
+                        return Err(e);
+                    }
+                };
+                let mut guard = results.lock().unwrap_or_else(|p| p.into_inner());
+                guard.push(r);
+                let n = guard.len();
+                progress(&Progress {
+                    task: task.id.clone(),
+                    done: done.fetch_add(1, Ordering::SeqCst) + 1,
+                    total,
+                    completion: 100.0 * guard.iter().map(EpisodeResult::tiered).sum::<f64>()
+                        / n as f64,
+                    successes: guard.iter().filter(|e| e.success).count(),
+                });
+            }
+        };
+        let workers = cfg.workers.min(cfg.episodes);
+        let outcomes: Vec<Result<(), EvalError>> = std::thread::scope(|s| {
+            let handles: Vec<_> = (0..workers).map(|_| s.spawn(worker)).collect();
+            handles
+                .into_iter()
+                .map(|h| {
+                    h.join().unwrap_or_else(|_| {
+                        Err(EvalError::Argument("an evaluation worker panicked".into()))
+                    })
+                })
+                .collect()
+        });
+        for o in outcomes {
+            o?;
+        }
+        let mut eps = results.into_inner().unwrap_or_else(|p| p.into_inner());
+        eps.sort_by_key(|e| e.episode);
+        rows.push(summarize(&task.id, &eps));
+        all.extend(eps);
+    }
+    Ok(Results {
+        policy: String::new(),
+        run: None,
+        checkpoint_step: None,
+        seed: cfg.seed,
+        episodes_per_task: cfg.episodes,
+        full_budget: cfg.full_budget,
+        tasks: rows,
+        episodes: all,
+    })
 }
 
-/// CSV of task rows.
-pub fn csv(rows: &[TaskSummary]) -> String {
-    let mut s = String::from(
-        "task,episodes,completion,completion_ci95,success,success_ci95_lo,success_ci95_hi,mean_steps,over_repetition\n",
-    );
-    for r in rows {
-        s.push_str(&format!(
-            "{},{},{:.4},{:.4},{:.4},{:.4},{:.4},{:.4},{}\n",
-            r.task,
-            r.episodes,
-            r.completion,
-            r.completion_ci95,
-            r.success,
-            r.success_ci95[0],
-            r.success_ci95[1],
-            r.mean_steps,
-            r.over_repetition
-        ));
-    }
-    s
-}
-
-/// Resolves `--tasks` (comma-separated ids, or the suites `libero_mem`, `libero_goal`, `all`).
+/// Resolves `--tasks` (comma-separated ids, or the suites `libero_mem`, `libero_goal`, `all`);
+/// `repeat` sets the repetition count of the repetition family (t1–t6).
 pub fn resolve_tasks(spec: &str, repeat: Option<usize>) -> Result<Vec<TaskSpec>, EvalError> {
     let mut out = Vec::new();
+    let mut push = |t: TaskSpec| -> Result<(), EvalError> {
+        out.push(match repeat {
+            Some(n) => sim::task::resolve_with_repeats(&t.id, n)?,
+            None => t,
+        });
+        Ok(())
+    };
     for part in spec.split(',').map(str::trim).filter(|s| !s.is_empty()) {
         match part {
-            "all" => out.extend(sim::task::list()),
-            "libero_mem" | "libero_goal" => out.extend(
-                sim::task::list()
+            "all" => {
+                for t in sim::task::list() {
+                    push(t)?;
+                }
+            }
+            "libero_mem" | "libero_goal" => {
+                for t in sim::task::list()
                     .into_iter()
-                    .filter(|t| t.id.starts_with(&format!("{part}/"))),
-            ),
-            id => out.push(match repeat {
-                Some(n) => sim::task::resolve_with_repeats(id, n)?,
-                None => sim::task::resolve(id)?,
-            }),
+                    .filter(|t| t.id.starts_with(&format!("{part}/")))
+                {
+                    push(t)?;
+                }
+            }
+            id => push(sim::task::resolve(id)?)?,
         }
     }
     if out.is_empty() {
@@ -331,55 +408,72 @@ pub fn resolve_tasks(spec: &str, repeat: Option<usize>) -> Result<Vec<TaskSpec>,
     Ok(out)
 }
 
+/// Writes `bytes` to `path` through a temporary file in the same folder and a rename, so a reader
+/// never sees a half-written file.
+pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), EvalError> {
+    let err = |e: std::io::Error| EvalError::Output {
+        path: path.to_path_buf(),
+        message: e.to_string(),
+    };
+    let dir = path.parent().filter(|p| !p.as_os_str().is_empty());
+    let dir = dir.unwrap_or(Path::new("."));
+    std::fs::create_dir_all(dir).map_err(err)?;
+    let tmp = dir.join(format!(
+        ".{}.tmp",
+        path.file_name()
+            .map_or("out".into(), |n| n.to_string_lossy())
+    ));
+    std::fs::write(&tmp, bytes).map_err(err)?;
+    std::fs::rename(&tmp, path).map_err(err)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn wilson_interval_brackets_the_rate() {
-        let [lo, hi] = wilson(19.0, 20.0);
-        assert!(lo > 0.74 && lo < 0.77 && hi > 0.99, "{lo} {hi}");
-        assert_eq!(wilson(0.0, 0.0), [0.0, 1.0]);
-        let [lo, hi] = wilson(0.0, 10.0);
-        assert!(lo == 0.0 && (hi - 0.2775).abs() < 1e-3, "{hi}");
-    }
-
-    #[test]
-    fn summary_numbers() {
-        let ep = |satisfied, success, failed| EpisodeResult {
-            task: "t".into(),
-            episode: 0,
-            seed: 0,
-            steps: 10,
-            satisfied,
-            goal_len: 4,
-            success,
-            over_repetition: failed,
-        };
-        let s = summarize(
-            "t",
-            &[
-                ep(4, true, false),
-                ep(2, false, false),
-                ep(0, false, false),
-                ep(4, false, true),
-            ],
-        );
-        assert_eq!(s.completion, 62.5);
-        assert_eq!(s.success, 25.0);
-        assert_eq!(s.over_repetition, 1);
-        assert!(s.completion_ci95 > 0.0);
-        let md = markdown(&[s.clone(), s]);
-        assert!(
-            md.contains("| t | 4 | 62.5 ±") && md.contains("**average**"),
-            "{md}"
-        );
-    }
 
     #[test]
     fn episode_seeds_differ_and_repeat() {
         assert_eq!(episode_seed(0, 3), episode_seed(0, 3));
         assert_ne!(episode_seed(0, 3), episode_seed(0, 4));
         assert_ne!(episode_seed(0, 3), episode_seed(1, 3));
+    }
+
+    #[test]
+    fn suites_and_repeats_resolve() {
+        let mem = resolve_tasks("libero_mem", None).unwrap();
+        assert_eq!(mem.len(), 10);
+        let goal = resolve_tasks("libero_goal", None).unwrap();
+        assert_eq!(goal.len(), 10);
+        let t3 = resolve_tasks("t3", Some(9)).unwrap();
+        assert_eq!(t3[0].goal_len, 9);
+        assert!(
+            resolve_tasks("t7", Some(4)).is_err(),
+            "t7 has no repetitions"
+        );
+        let e = resolve_tasks("t99", None).unwrap_err();
+        assert_eq!(e.exit_code(), 2);
+        assert!(resolve_tasks(" , ", None).is_err());
+        assert_eq!(task_slug("libero_mem/t3@5"), "libero_mem-t3@5");
+    }
+
+    #[test]
+    fn results_do_not_depend_on_workers_and_random_beats_nothing() {
+        let tasks = resolve_tasks("t1", None).unwrap();
+        let run = |workers| {
+            let cfg = EvalConfig {
+                episodes: 3,
+                seed: 5,
+                workers,
+                ..EvalConfig::default()
+            };
+            let make =
+                || -> Result<Box<dyn Policy>, EvalError> { Ok(Box::new(RandomPolicy::default())) };
+            evaluate(&tasks, &make, &cfg, &|_| {}).unwrap()
+        };
+        let (a, b) = (run(1), run(2));
+        assert_eq!(a.episodes, b.episodes);
+        assert_eq!(a.episodes.len(), 3);
+        assert!(a.episodes.iter().all(|e| e.steps == tasks[0].max_steps));
+        assert_eq!(a.tasks[0].success, 0.0);
     }
 }

@@ -2,158 +2,346 @@
 
 use std::path::PathBuf;
 use std::process::ExitCode;
-use std::sync::Mutex;
 
 use anyhow::Context;
-use clap::{Parser, ValueEnum};
-use eval::{EvalConfig, EvalError, Policy, RandomPolicy, ZeroPolicy};
+use clap::{Args, Parser, Subcommand, ValueEnum};
+use eval::report::{self, Results, ScalingRow};
+use eval::{EvalConfig, EvalError, Policy, RunDir};
 
-#[derive(Clone, Copy, ValueEnum)]
+#[derive(Clone, Copy, PartialEq, Eq, ValueEnum)]
 enum PolicyKind {
-    /// All-zero actions.
-    Zero,
+    /// The trained model of `--run`.
+    Model,
+    /// The scripted expert (privileged state).
+    Expert,
     /// Uniform random actions.
     Random,
+    /// All-zero actions.
+    Zero,
+}
+
+impl PolicyKind {
+    fn name(self) -> &'static str {
+        match self {
+            PolicyKind::Model => "model",
+            PolicyKind::Expert => "expert",
+            PolicyKind::Random => "random",
+            PolicyKind::Zero => "zero",
+        }
+    }
 }
 
 #[derive(Parser)]
 #[command(
     name = "eval",
     version,
-    about = "Closed-loop evaluation with subgoal-completion and success tables"
+    about = "Closed-loop evaluation with subgoal-completion and success tables",
+    args_conflicts_with_subcommands = true
 )]
 struct Cli {
-    /// Tasks: comma-separated ids (`t1,t3,libero_goal/turn_on_the_stove`) or `libero_mem`, `libero_goal`, `all`.
-    #[arg(long, default_value = "libero_mem")]
-    tasks: String,
+    #[command(subcommand)]
+    command: Option<Command>,
+    #[command(flatten)]
+    eval: EvalArgs,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// Put several evaluated runs side by side (subgoal completion and success tables).
+    Compare {
+        /// Run directories (their `eval/results.json`), eval output folders or results.json files.
+        #[arg(required = true)]
+        runs: Vec<PathBuf>,
+        /// Also write the tables to this Markdown file.
+        #[arg(long)]
+        out: Option<PathBuf>,
+    },
+    /// Temporal scaling: evaluate the repetition family at several repetition counts N.
+    Scaling {
+        /// Repetition counts (N unseen in training allowed), e.g. `3,5,7,9,12`.
+        #[arg(long, value_delimiter = ',', required = true)]
+        repeats: Vec<usize>,
+        #[command(flatten)]
+        eval: EvalArgs,
+    },
+}
+
+#[derive(Args, Clone)]
+struct EvalArgs {
+    /// Training run directory to evaluate (`runs/<name>`: config, model, checkpoints).
+    #[arg(long)]
+    run: Option<PathBuf>,
+    /// Policy: `model` (default with --run) or a sanity policy without a checkpoint.
+    #[arg(long, value_enum)]
+    policy: Option<PolicyKind>,
+    /// Tasks: comma-separated ids (`t1,t3,libero_goal/turn_on_the_stove`) or `libero_mem`,
+    /// `libero_goal`, `all` [default: the run's `[eval].tasks`, else libero_mem].
+    #[arg(long)]
+    tasks: Option<String>,
     /// Episodes per task.
     #[arg(long, default_value_t = 20)]
     episodes: usize,
-    /// Base seed.
+    /// Base seed (episode k uses a seed derived from it and k).
     #[arg(long, default_value_t = 0)]
     seed: u64,
-    /// Sanity policy to evaluate.
-    #[arg(long, value_enum, default_value = "zero")]
-    policy: PolicyKind,
-    /// Repetitions for the repetition family (t1–t6), e.g. 12 for the temporal-scaling test.
+    /// Repetitions for the repetition family (t1–t6), e.g. 12 (unseen in training is fine).
     #[arg(long)]
     repeat: Option<usize>,
     /// Run the whole step budget (upstream mem_6) instead of stopping at success.
     #[arg(long)]
     full_budget: bool,
-    /// Worker threads (one simulator each).
+    /// Worker threads (one simulator and one policy each).
     #[arg(long, default_value_t = 1)]
     workers: usize,
-    /// Folder for results.md, results.json and results.csv.
-    #[arg(long, default_value = "results")]
-    out: PathBuf,
+    /// Camera image side rendered for the model (as recorded by `sim generate`).
+    #[arg(long, default_value_t = 128)]
+    image_size: usize,
+    /// Folder for results.md, results.json and results.csv [default: RUN/eval, else `results`].
+    #[arg(long)]
+    out: Option<PathBuf>,
+    /// Record every rollout as an mcap episode under this folder.
+    #[arg(long)]
+    record: Option<PathBuf>,
+    /// Write slot-attention overlays of the first rollout to OUT/viz (model policy only).
+    #[arg(long)]
+    viz: bool,
+    /// Every how many steps a slot overlay is written.
+    #[arg(long, default_value_t = 4)]
+    viz_every: usize,
+    /// No progress bar.
+    #[arg(long)]
+    quiet: bool,
 }
 
 fn main() -> ExitCode {
-    match run(Cli::parse()) {
+    let cli = Cli::parse();
+    let result = match cli.command {
+        Some(Command::Compare { runs, out }) => compare(&runs, out),
+        Some(Command::Scaling { repeats, eval }) => scaling(&eval, &repeats),
+        None => evaluate(&cli.eval),
+    };
+    match result {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
             eprintln!("error: {e:#}");
-            let bad_input = matches!(
-                e.downcast_ref::<EvalError>(),
-                Some(EvalError::Task(_) | EvalError::Argument(_))
-            );
-            ExitCode::from(if bad_input { 2 } else { 1 })
+            let code = e
+                .downcast_ref::<EvalError>()
+                .map_or(1, EvalError::exit_code);
+            ExitCode::from(code)
         }
     }
 }
 
-fn make_policy(kind: PolicyKind) -> Box<dyn Policy> {
-    match kind {
-        PolicyKind::Zero => Box::new(ZeroPolicy),
-        PolicyKind::Random => Box::new(RandomPolicy::default()),
-    }
+/// The resolved policy choice, with the run it loads.
+struct Setup {
+    kind: PolicyKind,
+    run: Option<RunDir>,
+    device: burn::prelude::Device,
+    tasks: String,
+    out: PathBuf,
 }
 
-fn run(cli: Cli) -> anyhow::Result<()> {
-    if cli.episodes == 0 || cli.workers == 0 {
+fn setup(args: &EvalArgs) -> anyhow::Result<Setup> {
+    let kind = match (args.policy, &args.run) {
+        (Some(k), _) => k,
+        (None, Some(_)) => PolicyKind::Model,
+        (None, None) => {
+            return Err(EvalError::Argument(
+                "give a training run (`--run runs/NAME`) or a sanity policy (`--policy expert|random|zero`)"
+                    .into(),
+            )
+            .into());
+        }
+    };
+    let run = match (kind, &args.run) {
+        (PolicyKind::Model, Some(dir)) => Some(RunDir::open(dir)?),
+        (PolicyKind::Model, None) => {
+            return Err(
+                EvalError::Argument("`--policy model` needs `--run runs/NAME`".into()).into(),
+            );
+        }
+        _ => None,
+    };
+    if args.viz && kind != PolicyKind::Model {
+        return Err(EvalError::Argument("--viz needs the model policy (`--run`)".into()).into());
+    }
+    let device = match &run {
+        Some(r) => train::backend::device(r.config.backend.kind)
+            .map_err(|e| EvalError::Argument(e.to_string()))?,
+        None => burn::prelude::Device::flex(),
+    };
+    let tasks = match (&args.tasks, &run) {
+        (Some(t), _) => t.clone(),
+        (None, Some(r)) if !r.config.eval.tasks.is_empty() => r.config.eval.tasks.join(","),
+        _ => "libero_mem".to_string(),
+    };
+    let out = match (&args.out, &run) {
+        (Some(o), _) => o.clone(),
+        (None, Some(r)) => r.dir.join("eval"),
+        (None, None) => PathBuf::from("results"),
+    };
+    Ok(Setup {
+        kind,
+        run,
+        device,
+        tasks,
+        out,
+    })
+}
+
+fn make_policy(s: &Setup) -> Result<Box<dyn Policy>, EvalError> {
+    Ok(match s.kind {
+        PolicyKind::Model => Box::new(
+            s.run
+                .as_ref()
+                .ok_or_else(|| EvalError::Argument("no run".into()))?
+                .policy(&s.device)?,
+        ),
+        PolicyKind::Expert => Box::new(eval::ExpertPolicy::default()),
+        PolicyKind::Random => Box::new(eval::RandomPolicy::default()),
+        PolicyKind::Zero => Box::new(eval::ZeroPolicy),
+    })
+}
+
+fn run_tasks(
+    args: &EvalArgs,
+    s: &Setup,
+    tasks: &[sim::task::TaskSpec],
+    viz: Option<PathBuf>,
+) -> anyhow::Result<Results> {
+    let cfg = EvalConfig {
+        episodes: args.episodes,
+        seed: args.seed,
+        full_budget: args.full_budget,
+        image_size: args.image_size,
+        workers: args.workers,
+        record: args.record.clone(),
+        viz,
+        viz_every: args.viz_every,
+    };
+    let total = (tasks.len() * cfg.episodes) as u64;
+    let bar = if args.quiet {
+        indicatif::ProgressBar::hidden()
+    } else {
+        indicatif::ProgressBar::new(total)
+    };
+    bar.set_style(
+        indicatif::ProgressStyle::with_template(
+            "{bar:30} {pos}/{len} episodes  {msg}  {elapsed} ETA {eta}",
+        )
+        .expect("valid template"),
+    );
+    let make = || make_policy(s);
+    let progress = |p: &eval::Progress| {
+        bar.set_position(p.done as u64);
+        bar.set_message(format!(
+            "{}: completion {:.0} %, {} successes",
+            report::short(&p.task),
+            p.completion,
+            p.successes
+        ));
+    };
+    let mut results = eval::evaluate(tasks, &make, &cfg, &progress)?;
+    bar.finish_and_clear();
+    results.policy = s.kind.name().to_string();
+    results.run = s.run.as_ref().map(|r| r.dir.display().to_string());
+    results.checkpoint_step = s.run.as_ref().map(|r| r.step);
+    Ok(results)
+}
+
+fn header(s: &Setup, args: &EvalArgs) -> String {
+    let who = match &s.run {
+        Some(r) => format!("model {} (step {})", r.dir.display(), r.step),
+        None => format!("{} policy", s.kind.name()),
+    };
+    format!(
+        "{who}, seed {}, {} episodes per task{}\n\n",
+        args.seed,
+        args.episodes,
+        if args.full_budget {
+            ", full step budget"
+        } else {
+            ""
+        }
+    )
+}
+
+fn evaluate(args: &EvalArgs) -> anyhow::Result<()> {
+    let s = setup(args)?;
+    let tasks = eval::resolve_tasks(&s.tasks, args.repeat)?;
+    let viz = args.viz.then(|| s.out.join("viz"));
+    let results = run_tasks(args, &s, &tasks, viz.clone())?;
+    let md = format!("{}{}", header(&s, args), report::markdown(&results.tasks));
+    print!("{md}");
+    eval::write_atomic(&s.out.join("results.md"), md.as_bytes())?;
+    eval::write_atomic(
+        &s.out.join("results.json"),
+        serde_json::to_string_pretty(&results)?.as_bytes(),
+    )?;
+    eval::write_atomic(
+        &s.out.join("results.csv"),
+        report::csv(&results.tasks).as_bytes(),
+    )?;
+    eprintln!("wrote {}/results.{{md,json,csv}}", s.out.display());
+    if let Some(v) = viz {
+        eprintln!("slot overlays in {}", v.display());
+    }
+    if let Some(r) = &args.record {
+        eprintln!("rollouts recorded under {}", r.display());
+    }
+    Ok(())
+}
+
+fn scaling(args: &EvalArgs, repeats: &[usize]) -> anyhow::Result<()> {
+    if args.repeat.is_some() {
         return Err(
-            EvalError::Argument("--episodes and --workers must be at least 1".into()).into(),
+            EvalError::Argument("use --repeats with `scaling`, not --repeat".into()).into(),
         );
     }
-    let tasks = eval::resolve_tasks(&cli.tasks, cli.repeat)?;
-    let cfg = EvalConfig {
-        episodes: cli.episodes,
-        seed: cli.seed,
-        full_budget: cli.full_budget,
-        ..EvalConfig::default()
-    };
-    std::fs::create_dir_all(&cli.out).with_context(|| format!("creating {}", cli.out.display()))?;
-    let total = (tasks.len() * cfg.episodes) as u64;
-    let bar = indicatif::ProgressBar::new(total);
-    bar.set_style(
-        indicatif::ProgressStyle::with_template("{bar:30} {pos}/{len} episodes  {msg}  ETA {eta}")
-            .expect("valid template"),
-    );
+    let s = setup(args)?;
     let mut rows = Vec::new();
-    let mut all = Vec::new();
-    for task in &tasks {
-        let results = Mutex::new(Vec::new());
-        let next = std::sync::atomic::AtomicUsize::new(0);
-        std::thread::scope(|s| -> anyhow::Result<()> {
-            let handles: Vec<_> = (0..cli.workers.min(cfg.episodes))
-                .map(|_| {
-                    s.spawn(|| -> Result<(), EvalError> {
-                        let mut policy = make_policy(cli.policy);
-                        let mut env = eval::env_for(task, policy.as_ref(), &cfg)?;
-                        loop {
-                            let k = next.fetch_add(1, std::sync::atomic::Ordering::SeqCst);
-                            if k >= cfg.episodes {
-                                return Ok(());
-                            }
-                            let r = eval::run_episode(&mut env, task, policy.as_mut(), &cfg, k)?;
-                            let mut guard = results.lock().expect("no worker panicked");
-                            guard.push(r);
-                            let done = guard.len();
-                            let mean = guard.iter().map(|e| e.tiered()).sum::<f64>() / done as f64;
-                            bar.set_message(format!(
-                                "{}: completion {:.0} %",
-                                task.id,
-                                100.0 * mean
-                            ));
-                            bar.inc(1);
-                        }
-                    })
-                })
-                .collect();
-            for h in handles {
-                h.join().expect("worker panicked")?;
-            }
-            Ok(())
-        })?;
-        let mut eps = results.into_inner().expect("no worker panicked");
-        eps.sort_by_key(|e| e.episode);
-        rows.push(eval::summarize(&task.id, &eps));
-        all.extend(eps);
+    for &n in repeats {
+        let tasks = eval::resolve_tasks(&s.tasks, Some(n))?;
+        let results = run_tasks(args, &s, &tasks, None)?;
+        for t in results.tasks {
+            rows.push(ScalingRow {
+                task: t.task.split('@').next().unwrap_or(&t.task).to_string(),
+                repeats: n,
+                summary: t,
+            });
+        }
     }
-    bar.finish_and_clear();
-    let md = eval::markdown(&rows);
+    let md = format!("{}{}", header(&s, args), report::scaling_table(&rows));
     print!("{md}");
-    let json = serde_json::json!({ "policy": policy_name(cli.policy), "seed": cli.seed, "tasks": rows, "episodes": all });
-    write_atomic(&cli.out.join("results.md"), md.as_bytes())?;
-    write_atomic(
-        &cli.out.join("results.json"),
-        serde_json::to_string_pretty(&json)?.as_bytes(),
+    eval::write_atomic(&s.out.join("scaling.md"), md.as_bytes())?;
+    eval::write_atomic(
+        &s.out.join("scaling.json"),
+        serde_json::to_string_pretty(&rows)?.as_bytes(),
     )?;
-    write_atomic(&cli.out.join("results.csv"), eval::csv(&rows).as_bytes())?;
+    eprintln!("wrote {}/scaling.{{md,json}}", s.out.display());
     Ok(())
 }
 
-fn write_atomic(path: &std::path::Path, bytes: &[u8]) -> anyhow::Result<()> {
-    let tmp = path.with_extension("tmp");
-    std::fs::write(&tmp, bytes).with_context(|| format!("writing {}", tmp.display()))?;
-    std::fs::rename(&tmp, path).with_context(|| format!("writing {}", path.display()))?;
-    Ok(())
-}
-
-fn policy_name(kind: PolicyKind) -> &'static str {
-    match kind {
-        PolicyKind::Zero => "zero",
-        PolicyKind::Random => "random",
+fn compare(paths: &[PathBuf], out: Option<PathBuf>) -> anyhow::Result<()> {
+    let mut runs = Vec::new();
+    for p in paths {
+        let (file, r) = Results::load(p)?;
+        let name = r
+            .run
+            .as_deref()
+            .map(|d| {
+                std::path::Path::new(d)
+                    .file_name()
+                    .map_or(d.to_string(), |n| n.to_string_lossy().into_owned())
+            })
+            .unwrap_or_else(|| format!("{} ({})", r.policy, file.display()));
+        runs.push((name, r));
     }
+    let md = report::compare(&runs);
+    print!("{md}");
+    if let Some(o) = out {
+        eval::write_atomic(&o, md.as_bytes())
+            .with_context(|| format!("writing {}", o.display()))?;
+    }
+    Ok(())
 }

@@ -1,5 +1,6 @@
 //! The `eval` binary with sanity policies.
 
+use std::path::Path;
 use std::process::Command;
 
 fn eval(args: &[&str]) -> (i32, String, String) {
@@ -50,10 +51,142 @@ fn zero_policy_table_for_t1() {
 
 #[test]
 fn unknown_task_is_exit_2() {
-    let (code, _, err) = eval(&["--tasks", "t99", "--episodes", "1"]);
+    let (code, _, err) = eval(&["--tasks", "t99", "--episodes", "1", "--policy", "zero"]);
     assert_eq!(code, 2, "{err}");
     assert!(
         err.contains("t99") && err.contains("libero_mem/t1"),
         "{err}"
     );
+}
+
+#[test]
+fn no_policy_and_model_without_run_are_exit_2() {
+    let (code, _, err) = eval(&["--tasks", "t1"]);
+    assert_eq!(code, 2, "{err}");
+    assert!(err.contains("--run runs/NAME"), "{err}");
+    let (code, _, err) = eval(&["--tasks", "t1", "--policy", "model"]);
+    assert_eq!(code, 2, "{err}");
+    let (code, _, err) = eval(&["--tasks", "t1", "--policy", "zero", "--viz"]);
+    assert_eq!(code, 2, "{err}");
+    assert!(err.contains("--viz needs the model policy"), "{err}");
+}
+
+/// A run directory as `train` writes it, without checkpoints yet.
+fn bare_run(dir: &Path) -> model::ModelConfig {
+    std::fs::create_dir_all(dir).unwrap();
+    let cfg_path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../configs/tiny.toml");
+    std::fs::copy(&cfg_path, dir.join("config.toml")).unwrap();
+    let model = model::ModelConfig::tiny(model::Variant::ESlotSsm {
+        oracle_subgoal: false,
+    })
+    .with_vocab_from(["put the bowl on the plate"]);
+    std::fs::write(
+        dir.join("model.json"),
+        serde_json::to_string(&model).unwrap(),
+    )
+    .unwrap();
+    std::fs::write(
+        dir.join("action_stats.json"),
+        r#"{"q01":[-1,-1,-1,-1,-1,-1,-1],"q99":[1,1,1,1,1,1,1],"mask":[true,true,true,true,true,true,false]}"#,
+    )
+    .unwrap();
+    model
+}
+
+#[test]
+fn run_without_checkpoint_is_exit_2() {
+    let tmp = tempfile::tempdir().unwrap();
+    let run = tmp.path().join("run");
+    bare_run(&run);
+    let (code, _, err) = eval(&["--run", run.to_str().unwrap(), "--tasks", "t1"]);
+    assert_eq!(code, 2, "{err}");
+    assert!(err.contains("no complete checkpoint"), "{err}");
+    let (code, _, err) = eval(&["--run", tmp.path().join("nope").to_str().unwrap()]);
+    assert_eq!(code, 2, "{err}");
+    assert!(err.contains("no such run directory"), "{err}");
+}
+
+#[test]
+fn checkpoint_of_another_model_is_exit_2() {
+    let tmp = tempfile::tempdir().unwrap();
+    let run = tmp.path().join("run");
+    let model = bare_run(&run);
+    let ck = run.join("checkpoints").join("step_000000010");
+    std::fs::create_dir_all(&ck).unwrap();
+    let other = model::ModelConfig {
+        variant: model::Variant::SlotVla { history: 8 },
+        ..model
+    };
+    let state = serde_json::json!({
+        "format": train::checkpoint::STATE_FORMAT,
+        "step": 10,
+        "sampler": train::dataset::Sampler::new(0, 4),
+        "rng_seed": 0,
+        "elapsed_s": 1.0,
+        "model": other,
+    });
+    std::fs::write(ck.join("state.json"), state.to_string()).unwrap();
+    std::fs::write(ck.join("model.bpk"), b"not weights").unwrap();
+    let (code, _, err) = eval(&["--run", run.to_str().unwrap(), "--tasks", "t1"]);
+    assert_eq!(code, 2, "{err}");
+    assert!(
+        err.contains("step_000000010") && err.contains("slotvla"),
+        "{err}"
+    );
+}
+
+#[test]
+fn compare_reads_results_and_rejects_garbage() {
+    let tmp = tempfile::tempdir().unwrap();
+    let (a, b) = (tmp.path().join("a"), tmp.path().join("b"));
+    for (dir, policy) in [(&a, "zero"), (&b, "random")] {
+        let (code, _, err) = eval(&[
+            "--tasks",
+            "t1",
+            "--episodes",
+            "1",
+            "--policy",
+            policy,
+            "--quiet",
+            "--out",
+            dir.to_str().unwrap(),
+        ]);
+        assert_eq!(code, 0, "{err}");
+    }
+    let (code, out, err) = eval(&["compare", a.to_str().unwrap(), b.to_str().unwrap()]);
+    assert_eq!(code, 0, "{err}");
+    assert!(
+        out.contains("Subgoal completion %") && out.contains("| t1 | 0.0 | 0.0 |"),
+        "{out}"
+    );
+    std::fs::write(tmp.path().join("bad.json"), "[1, 2]").unwrap();
+    let (code, _, err) = eval(&["compare", tmp.path().join("bad.json").to_str().unwrap()]);
+    assert_eq!(code, 2, "{err}");
+    assert!(err.contains("bad.json: not an eval results file"), "{err}");
+}
+
+#[test]
+fn expert_scaling_table_over_repetitions() {
+    let tmp = tempfile::tempdir().unwrap();
+    let (code, out, err) = eval(&[
+        "scaling",
+        "--policy",
+        "expert",
+        "--tasks",
+        "t1",
+        "--repeats",
+        "1,2",
+        "--episodes",
+        "1",
+        "--quiet",
+        "--out",
+        tmp.path().to_str().unwrap(),
+    ]);
+    assert_eq!(code, 0, "{err}");
+    assert!(out.contains("| task | N = 1 | N = 2 |"), "{out}");
+    assert!(out.contains("| t1 | 100.0 (100) | 100.0 (100) |"), "{out}");
+    let rows: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(tmp.path().join("scaling.json")).unwrap())
+            .unwrap();
+    assert_eq!(rows.as_array().unwrap().len(), 2);
 }

@@ -108,6 +108,8 @@ struct StreamState {
     ssm: Option<SlotSsmState>,
     /// Decoder tokens of the last h frames, oldest first, each `[1, V₁, D_dec]` (h > 1 only).
     history: VecDeque<Tensor<3>>,
+    /// Slot-attention masks of the latest frame `[1, K, M]` (slot variants).
+    masks: Option<Tensor<3>>,
 }
 
 /// A policy used step by step; its state lives inside and is reset per episode.
@@ -158,6 +160,16 @@ impl StreamingPolicy {
     /// Steps taken since the last reset.
     pub fn step_count(&self) -> usize {
         self.state.step
+    }
+
+    /// The slot-attention masks of the latest frame, `[K][M]` with M = the encoder's token grid
+    /// (row-major, `rows × cols` of the feature map); `None` before the first step or for the
+    /// dense variant. Each token's weights sum to 1 over the slots.
+    pub fn last_masks(&self) -> Option<Vec<Vec<f32>>> {
+        let m = self.state.masks.as_ref()?;
+        let [_, k, n] = m.dims();
+        let v = m.clone().into_data().try_to_vec::<f32>().ok()?;
+        Some((0..k).map(|i| v[i * n..(i + 1) * n].to_vec()).collect())
     }
 
     /// Floats held in the carried state now (slots + SSM states + history tokens).
@@ -271,8 +283,9 @@ impl StreamingPolicy {
         let feats = m.encoder.forward_frames(image); // [1, M, D_f]
         let z = match &m.slot_attention {
             Some(sa) => {
-                let (slots, _) = sa.step(feats.clone(), self.state.slots.take());
+                let (slots, masks) = sa.step(feats.clone(), self.state.slots.take());
                 self.state.slots = Some(slots.clone());
+                self.state.masks = Some(masks);
                 Some(match (&m.slot_ssm, &m.fusion) {
                     (Some(ssm), Some(fusion)) => {
                         let k = cfg.slots.num_slots;
@@ -391,6 +404,13 @@ mod tests {
         assert_eq!(chunk.len(), 4);
         let floats = policy.state_floats();
         assert_eq!(floats, cfg.constant_state_floats());
+        let masks = policy.last_masks().expect("slot variant keeps masks");
+        assert_eq!(masks.len(), cfg.slots.num_slots);
+        let m = masks[0].len();
+        for j in 0..m {
+            let total: f32 = masks.iter().map(|row| row[j]).sum();
+            assert!((total - 1.0).abs() < 1e-4, "token {j}: {total}");
+        }
         policy.act(&obs, "put the bowl on the plate", None).unwrap();
         policy.observe(&obs, Some("bowl")).unwrap();
         assert_eq!(policy.step_count(), 3);

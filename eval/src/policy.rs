@@ -1,0 +1,256 @@
+//! Policies a rollout can be run with: the trained model (through the streaming policy), the scripted
+//! expert and the two floors (zero and random actions).
+
+use burn::prelude::Device;
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+use sim::expert::Expert;
+use sim::task::TaskSpec;
+use sim::{Env, Observation};
+
+use crate::EvalError;
+
+/// The action sent once a scripted policy has nothing left to do: stand still, gripper open.
+pub const IDLE_ACTION: [f32; 7] = [0.0, 0.0, 0.0, 0.0, 0.0, 0.0, -1.0];
+
+/// Something that maps observations to actions, step by step.
+pub trait Policy {
+    /// Called before each episode with its task and seed.
+    fn reset(&mut self, task: &TaskSpec, seed: u64) -> Result<(), EvalError>;
+    /// The next 7-D action for the state `env` is in (`obs` is its latest observation).
+    fn act(&mut self, env: &Env, obs: &Observation) -> Result<[f32; 7], EvalError>;
+    /// Whether the policy needs camera images (off: faster state-only rollouts).
+    fn needs_images(&self) -> bool;
+    /// Slot-attention masks of the latest step, `[K][rows·cols]` with the token grid's
+    /// `(rows, cols)`; `None` for policies without slots.
+    fn slot_masks(&self) -> Option<(Vec<Vec<f32>>, usize, usize)> {
+        None
+    }
+}
+
+/// Sends zeros with the gripper at 0: a floor for every table.
+#[derive(Debug, Default, Clone, Copy)]
+pub struct ZeroPolicy;
+
+impl Policy for ZeroPolicy {
+    fn reset(&mut self, _: &TaskSpec, _: u64) -> Result<(), EvalError> {
+        Ok(())
+    }
+    fn act(&mut self, _: &Env, _: &Observation) -> Result<[f32; 7], EvalError> {
+        Ok([0.0; 7])
+    }
+    fn needs_images(&self) -> bool {
+        false
+    }
+}
+
+/// Uniform random actions in [−1, 1], drawn from the episode seed.
+#[derive(Debug, Clone)]
+pub struct RandomPolicy {
+    rng: ChaCha8Rng,
+}
+
+impl Default for RandomPolicy {
+    fn default() -> Self {
+        RandomPolicy {
+            rng: ChaCha8Rng::seed_from_u64(0),
+        }
+    }
+}
+
+impl Policy for RandomPolicy {
+    fn reset(&mut self, _: &TaskSpec, seed: u64) -> Result<(), EvalError> {
+        self.rng = ChaCha8Rng::seed_from_u64(seed ^ 0x0005_eed0_fa11);
+        Ok(())
+    }
+    fn act(&mut self, _: &Env, _: &Observation) -> Result<[f32; 7], EvalError> {
+        Ok(std::array::from_fn(|_| {
+            self.rng.random_range(-1.0f32..=1.0)
+        }))
+    }
+    fn needs_images(&self) -> bool {
+        false
+    }
+}
+
+/// The scripted expert of `sim::expert` (privileged state), re-planned per episode from its seed;
+/// once its plan is finished it idles with the gripper open.
+#[derive(Default)]
+pub struct ExpertPolicy {
+    expert: Option<Expert>,
+}
+
+impl Policy for ExpertPolicy {
+    fn reset(&mut self, task: &TaskSpec, seed: u64) -> Result<(), EvalError> {
+        self.expert = Some(Expert::new(task, seed));
+        Ok(())
+    }
+    fn act(&mut self, env: &Env, obs: &Observation) -> Result<[f32; 7], EvalError> {
+        let expert = self
+            .expert
+            .as_mut()
+            .ok_or_else(|| EvalError::Argument("the expert acts only after reset".into()))?;
+        Ok(expert.act(env, obs).unwrap_or(IDLE_ACTION))
+    }
+    fn needs_images(&self) -> bool {
+        false
+    }
+}
+
+/// A trained model run step by step: each step the agentview frame (resized to the model's input
+/// as the data pipeline resizes training frames), the task instruction and, for
+/// `e_slotssm` with `oracle_subgoal`, the goal tracker's pending subgoal go in; the first action of
+/// the predicted chunk comes out, un-normalised with the run's action statistics, clamped to
+/// [−1, 1], with the gripper binarised by its sign (as upstream `mem_6`).
+pub struct ModelPolicy {
+    policy: model::StreamingPolicy,
+    instruction: String,
+    oracle_subgoal: bool,
+    grid: (usize, usize),
+}
+
+impl ModelPolicy {
+    /// Wraps a loaded model with the run's action statistics.
+    pub fn new(
+        model: model::PolicyModel,
+        stats: model::ActionStats,
+        device: &Device,
+    ) -> Result<Self, EvalError> {
+        let cfg = &model.config;
+        let oracle_subgoal = matches!(
+            cfg.variant,
+            model::Variant::ESlotSsm {
+                oracle_subgoal: true
+            }
+        );
+        let stride: usize = cfg.encoder.strides.iter().product::<usize>().max(1);
+        let grid = (cfg.image_size[0] / stride, cfg.image_size[1] / stride);
+        let policy = model::StreamingPolicy::new(model, device)
+            .map_err(|e| EvalError::Model(e.to_string()))?
+            .with_action_stats(stats);
+        Ok(ModelPolicy {
+            policy,
+            instruction: String::new(),
+            oracle_subgoal,
+            grid,
+        })
+    }
+
+    /// Whether the pending subgoal text is fed to the model.
+    pub fn uses_oracle_subgoal(&self) -> bool {
+        self.oracle_subgoal
+    }
+}
+
+/// Post-processes one un-normalised action: dims 0–5 clamped to [−1, 1], gripper to ±1 by sign.
+pub fn finish_action(a: [f32; 7]) -> [f32; 7] {
+    let mut out = a;
+    for v in out.iter_mut().take(6) {
+        *v = if v.is_finite() {
+            v.clamp(-1.0, 1.0)
+        } else {
+            0.0
+        };
+    }
+    out[6] = if out[6] > 0.0 { 1.0 } else { -1.0 };
+    out
+}
+
+impl Policy for ModelPolicy {
+    fn reset(&mut self, task: &TaskSpec, _: u64) -> Result<(), EvalError> {
+        self.policy.reset();
+        self.instruction = task.instruction.clone();
+        Ok(())
+    }
+
+    fn act(&mut self, _: &Env, obs: &Observation) -> Result<[f32; 7], EvalError> {
+        let s = obs.image_size as u32;
+        if s == 0 || obs.agentview_rgb.len() != (s * s * 3) as usize {
+            return Err(EvalError::Model(
+                "the model needs rendered agentview frames".into(),
+            ));
+        }
+        let [h, w] = self.policy.model().config.image_size;
+        let frame = data::imageio::resize_rgb(
+            data::RgbImage {
+                width: s,
+                height: s,
+                channels: 3,
+                data: obs.agentview_rgb.clone(),
+            },
+            w as u32,
+            h as u32,
+        );
+        let input = model::Observation {
+            rgb: &frame.data,
+            height: frame.height as usize,
+            width: frame.width as usize,
+            wrist_rgb: None,
+            state: Some(obs.state),
+        };
+        let subgoal = self.oracle_subgoal.then(|| {
+            obs.goal
+                .as_ref()
+                .and_then(|g| g.pending.clone())
+                .unwrap_or_default()
+        });
+        let chunk = self
+            .policy
+            .act(&input, &self.instruction, subgoal.as_deref())
+            .map_err(|e| EvalError::Model(e.to_string()))?;
+        let first = chunk
+            .first()
+            .copied()
+            .ok_or_else(|| EvalError::Model("the model returned an empty action chunk".into()))?;
+        Ok(finish_action(first))
+    }
+
+    fn needs_images(&self) -> bool {
+        true
+    }
+
+    fn slot_masks(&self) -> Option<(Vec<Vec<f32>>, usize, usize)> {
+        let masks = self.policy.last_masks()?;
+        let (rows, cols) = self.grid;
+        (masks.first()?.len() == rows * cols).then_some((masks, rows, cols))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn finish_action_clamps_and_binarises() {
+        assert_eq!(
+            finish_action([2.0, -3.0, 0.5, f32::NAN, 0.0, -0.25, 0.3]),
+            [1.0, -1.0, 0.5, 0.0, 0.0, -0.25, 1.0]
+        );
+        assert_eq!(finish_action([0.0; 7])[6], -1.0);
+        assert_eq!(finish_action([0.0, 0.0, 0.0, 0.0, 0.0, 0.0, -0.7])[6], -1.0);
+    }
+
+    #[test]
+    fn expert_policy_solves_t1_through_the_same_loop() {
+        let task = sim::task::resolve("t1").unwrap();
+        let cfg = sim::EnvConfig {
+            render: false,
+            ..sim::EnvConfig::default()
+        };
+        let mut env = Env::from_task(&task, cfg).unwrap();
+        let mut p = ExpertPolicy::default();
+        let first = env.reset(0).unwrap();
+        assert!(p.act(&env, &first).is_err(), "act before reset");
+        p.reset(&task, 3).unwrap();
+        let mut obs = env.reset(3).unwrap();
+        let mut done = false;
+        for _ in 0..task.max_steps {
+            obs = env.step(&p.act(&env, &obs).unwrap()).unwrap();
+            if obs.goal.as_ref().unwrap().done {
+                done = true;
+                break;
+            }
+        }
+        assert!(done, "the expert finishes T1 within its budget");
+    }
+}
