@@ -15,5 +15,12 @@ log=$(mktemp)
 trap 'rm -f "$log"' EXIT
 status=0
 cargo test --workspace --features data/burn --no-fail-fast 2>&1 | tee "$log" || status=$?
+# The tiny model's T1 table from the end-to-end test (generate → train → eval), for the CI log.
+report="${CARGO_TARGET_DIR:-target}/e2e/results.md"
+if [ -f "$report" ]; then
+  echo
+  cat "$report"
+  echo
+fi
 awk '/^test result:/ { p += $4; f += $6 } END { printf "%d passed, %d failed\n", p, f }' "$log"
 exit "$status"

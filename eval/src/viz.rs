@@ -114,7 +114,7 @@ impl Writer {
         obs: &Observation,
         policy: &dyn Policy,
     ) -> Result<(), EvalError> {
-        if step % self.every != 0 {
+        if !step.is_multiple_of(self.every) {
             return Ok(());
         }
         let Some((masks, rows, cols)) = policy.slot_masks() else {
