@@ -17,6 +17,7 @@ pub use env::{Env, EnvConfig, EnvError, GoalStatus, Observation};
 pub mod assets;
 pub mod bench;
 pub mod generate;
+pub mod pack;
 pub mod predicates;
 pub mod record;
 pub mod scene;

