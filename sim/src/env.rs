@@ -370,6 +370,59 @@ impl Env {
         )))
     }
 
+    /// Resets to a stored state, as LIBERO's `set_init_state` after `reset()`: the fixtures are
+    /// placed from `seed` (LIBERO re-draws them at every reset; init states do not hold them), then
+    /// `qpos` and `qvel` are written verbatim and the model is forwarded. The controller restarts at the
+    /// current pose and the gripper command at rest. No settling: call [`Env::settle`] for the
+    /// evaluators' idle steps. A state of another layout is an error naming both sizes.
+    pub fn reset_to_init(
+        &mut self,
+        seed: u64,
+        qpos: &[f64],
+        qvel: &[f64],
+    ) -> Result<Observation, EnvError> {
+        let (nq, nv) = (self.model.nq(), self.model.nv());
+        if qpos.len() != nq || qvel.len() != nv {
+            return Err(EnvError::Config(format!(
+                "init state has nq {} and nv {}, this model has nq {nq} and nv {nv}",
+                qpos.len(),
+                qvel.len()
+            )));
+        }
+        let mut rng = ChaCha8Rng::seed_from_u64(seed);
+        self.data.reset();
+        self.place_robot(&mut rng);
+        if let World::Task(scene, _) = &self.world {
+            scene.sample_init(&mut self.data, &mut rng)?;
+        }
+        self.data.qpos_mut().copy_from_slice(qpos);
+        self.data.qvel_mut().copy_from_slice(qvel);
+        self.data.ctrl_mut().fill(0.0);
+        self.data.forward()?;
+        self.osc = OscPose::new(self.ids.clone(), &self.data);
+        self.gripper = GripperRamp::default();
+        self.steps = 0;
+        if let World::Task(_, Some(t)) = &mut self.world {
+            t.reset();
+        }
+        self.track_goal();
+        self.observe()
+    }
+
+    /// Runs the configured settle steps (`settle_steps` × `settle_action`, not counted as policy
+    /// steps) and restarts the goal tracker on the settled state, as [`Env::reset`] does.
+    pub fn settle(&mut self) -> Result<Observation, EnvError> {
+        for _ in 0..self.cfg.settle_steps {
+            self.step_physics(&self.cfg.settle_action.clone())?;
+        }
+        self.steps = 0;
+        if let World::Task(_, Some(t)) = &mut self.world {
+            t.reset();
+        }
+        self.track_goal();
+        self.observe()
+    }
+
     /// Why the settled start is invalid (an `:init` relation false, or interpenetration), if it is.
     fn start_problem(&self) -> Option<String> {
         let scene = self.scene()?;

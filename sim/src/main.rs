@@ -112,6 +112,10 @@ enum Command {
         /// Render an MJCF file instead of the built-in scene.
         #[arg(long)]
         mjcf: Option<PathBuf>,
+        /// Start from LIBERO's init state K of the task (needs the LIBERO pack; the task must have
+        /// LIBERO's qpos layout, as the builtin libero_goal scenes do); fixtures still come from --seed.
+        #[arg(long, requires = "task")]
+        init: Option<usize>,
         /// Rendering quality.
         #[arg(long, value_enum, default_value = "fast")]
         quality: Quality,
@@ -190,6 +194,37 @@ fn render_start(
 ) -> anyhow::Result<sim::render::Frame> {
     let mut env = env.map_err(classify)?;
     env.reset(seed).map_err(classify)?;
+    let (r, data) = env.renderer_mut().context("rendering is off")?;
+    r.render_named(data, camera, size, Channels::RGB)
+        .map_err(|e| classify(e.into()))
+}
+
+/// Renders `task` from LIBERO's init state `k` (fixtures placed from `seed`).
+fn render_init(
+    task: &sim::task::TaskSpec,
+    cfg: EnvConfig,
+    seed: u64,
+    k: usize,
+    camera: &str,
+    size: usize,
+) -> anyhow::Result<sim::render::Frame> {
+    let pack = sim::pack::LiberoPack::locate_default().map_err(|e| BadInput(e.to_string()))?;
+    let states = pack
+        .init_states(&task.id)
+        .map_err(|e| BadInput(e.to_string()))?;
+    let mut env = Env::from_task(task, cfg).map_err(classify)?;
+    let (nq, nv) = (env.model().nq(), env.model().nv());
+    let state = states
+        .state(k, nq, nv)
+        .map_err(|e| BadInput(e.to_string()))?
+        .ok_or_else(|| {
+            BadInput(format!(
+                "--init {k}: {} holds {} states",
+                states.source, states.rows
+            ))
+        })?;
+    env.reset_to_init(seed, state.qpos, state.qvel)
+        .map_err(classify)?;
     let (r, data) = env.renderer_mut().context("rendering is off")?;
     r.render_named(data, camera, size, Channels::RGB)
         .map_err(|e| classify(e.into()))
@@ -366,6 +401,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             seed,
             mjcf,
             quality,
+            init,
         } => {
             if size == 0 || size > 4096 {
                 return Err(
@@ -385,7 +421,10 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                         quality,
                         ..EnvConfig::default()
                     };
-                    render_start(Env::from_task(&spec, cfg), seed, &camera, size)?
+                    match init {
+                        None => render_start(Env::from_task(&spec, cfg), seed, &camera, size)?,
+                        Some(k) => render_init(&spec, cfg, seed, k, &camera, size)?,
+                    }
                 }
                 (None, Some(path)) => {
                     let model = std::sync::Arc::new(

@@ -108,6 +108,25 @@ impl LiberoPack {
             .find(|p| p.exists())
     }
 
+    /// The init states of the LIBERO task `id` (`<suite>/<file_stem>`, e.g. the builtin
+    /// `libero_goal/…` ids, which use LIBERO's names).
+    pub fn init_states(&self, id: &str) -> Result<InitStates, InitError> {
+        let bad = |message: String| InitError::Container {
+            path: id.to_string(),
+            message,
+        };
+        let (suite, stem) = id
+            .split_once('/')
+            .ok_or_else(|| bad("not a `<suite>/<task>` id".into()))?;
+        if !LIBERO_SUITES.contains(&suite) {
+            return Err(bad(format!(
+                "LIBERO ships init states for {} only",
+                LIBERO_SUITES.join(", ")
+            )));
+        }
+        InitStates::read(&self.init_file(suite, stem))
+    }
+
     /// The init-state file of a task (`<suite>/<stem>.pruned_init`).
     pub fn init_file(&self, suite: &str, stem: &str) -> PathBuf {
         self.init_dir()
@@ -227,5 +246,42 @@ mod tests {
         assert_eq!(st.time, 0.0);
         assert!(st.qvel.iter().all(|&v| v == 0.0));
         assert!((st.qpos[7] - 0.0208).abs() < 1e-3 && (st.qpos[8] + 0.0208).abs() < 1e-3);
+    }
+
+    /// The builtin libero_goal scenes have LIBERO's qpos layout (nq 41, nv 37), so LIBERO's init
+    /// state k is reproduced exactly; a task of another layout gets a size error.
+    #[test]
+    fn libero_goal_init_state_reproduces_qpos_exactly() {
+        let Ok(pack) = LiberoPack::locate_default() else {
+            eprintln!("LIBERO pack not installed; skipping");
+            return;
+        };
+        let id = "libero_goal/put_the_bowl_on_the_plate";
+        let states = pack.init_states(id).unwrap();
+        let task = crate::task::resolve(id).unwrap();
+        let cfg = crate::EnvConfig {
+            render: false,
+            ..Default::default()
+        };
+        let mut env = crate::Env::from_task(&task, cfg.clone()).unwrap();
+        let (nq, nv) = (env.model().nq(), env.model().nv());
+        assert_eq!((nq, nv), (41, 37));
+        for k in [0, 7, 49] {
+            let st = states.state(k, nq, nv).unwrap().unwrap();
+            env.reset_to_init(3, st.qpos, st.qvel).unwrap();
+            assert_eq!(env.data().qpos(), st.qpos, "state {k}");
+            assert_eq!(env.data().qvel(), st.qvel, "state {k}");
+        }
+        let settled = env.settle().unwrap();
+        assert!(settled.state.iter().all(|v| v.is_finite()));
+        let t1 = crate::task::resolve("t1").unwrap();
+        let env = crate::Env::from_task(&t1, cfg).unwrap();
+        let e = states
+            .state(0, env.model().nq(), env.model().nv())
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("79 columns") && e.contains("needs 90"), "{e}");
+        let e = pack.init_states("libero_mem/t1").unwrap_err().to_string();
+        assert!(e.contains("init states for"), "{e}");
     }
 }
