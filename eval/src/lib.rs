@@ -110,7 +110,14 @@ pub struct EvalConfig {
     pub viz: Option<PathBuf>,
     /// Every how many steps a visualisation frame is written.
     pub viz_every: usize,
+    /// LIBERO's protocol for LIBERO tasks: episode k starts from the task's init state k (from the
+    /// LIBERO pack), fixtures placed from the episode seed, then 10 idle steps (OpenVLA's
+    /// `num_steps_wait`) before the policy acts.
+    pub libero_init: bool,
 }
+
+/// Idle steps after an init state under [`EvalConfig::libero_init`] (OpenVLA's `num_steps_wait`).
+pub const LIBERO_IDLE_STEPS: usize = 10;
 
 impl Default for EvalConfig {
     fn default() -> Self {
@@ -123,6 +130,7 @@ impl Default for EvalConfig {
             record: None,
             viz: None,
             viz_every: 4,
+            libero_init: false,
         }
     }
 }
@@ -177,10 +185,27 @@ pub fn run_episode(
     cfg: &EvalConfig,
     k: usize,
     out: &RolloutOutputs,
+    init: Option<&sim::pack::InitStates>,
 ) -> Result<EpisodeResult, EvalError> {
     let seed = episode_seed(cfg.seed, k as u64);
     policy.reset(task, seed)?;
-    let mut obs = env.reset(seed)?;
+    let mut obs = match init {
+        None => env.reset(seed)?,
+        Some(states) => {
+            let (nq, nv) = (env.model().nq(), env.model().nv());
+            let st = states
+                .state(k, nq, nv)
+                .map_err(|e| EvalError::Argument(e.to_string()))?
+                .ok_or_else(|| {
+                    EvalError::Argument(format!(
+                        "episode {k}: {} holds only {} init states",
+                        states.source, states.rows
+                    ))
+                })?;
+            env.reset_to_init(seed, st.qpos, st.qvel)?;
+            env.settle()?
+        }
+    };
     let mut recorder = match &out.record {
         Some(path) => Some(
             Recorder::create(path, env, task, seed, data::WriterOptions::default()).map_err(
@@ -250,6 +275,11 @@ pub fn env_for(task: &TaskSpec, policy: &dyn Policy, cfg: &EvalConfig) -> Result
             render: policy.needs_images() || record,
             segmentation: record,
             image_size: cfg.image_size,
+            settle_steps: if cfg.libero_init {
+                LIBERO_IDLE_STEPS
+            } else {
+                EnvConfig::default().settle_steps
+            },
             ..EnvConfig::default()
         },
     )?)
@@ -301,6 +331,16 @@ pub fn evaluate(
     let mut rows = Vec::new();
     let mut all = Vec::new();
     for (ti, task) in tasks.iter().enumerate() {
+        let init = if cfg.libero_init {
+            let pack = sim::pack::LiberoPack::locate_default()
+                .map_err(|e| EvalError::Argument(e.to_string()))?;
+            Some(
+                pack.init_states(&task.id)
+                    .map_err(|e| EvalError::Argument(e.to_string()))?,
+            )
+        } else {
+            None
+        };
         let results = Mutex::new(Vec::new());
         let next = AtomicUsize::new(0);
         let stop = AtomicBool::new(false);
@@ -320,7 +360,15 @@ pub fn evaluate(
                     viz: cfg.viz.clone().filter(|_| ti == 0 && k == 0),
                     viz_every: cfg.viz_every,
                 };
-                let r = run_episode(&mut env, task, policy.as_mut(), cfg, k, &outputs);
+                let r = run_episode(
+                    &mut env,
+                    task,
+                    policy.as_mut(),
+                    cfg,
+                    k,
+                    &outputs,
+                    init.as_ref(),
+                );
                 let r = match r {
                     Ok(r) => r,
                     Err(e) => {

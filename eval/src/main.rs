@@ -108,6 +108,10 @@ struct EvalArgs {
     /// Every how many steps a slot overlay is written.
     #[arg(long, default_value_t = 4)]
     viz_every: usize,
+    /// LIBERO's protocol for LIBERO tasks: episode k starts from the task's init state k (needs the
+    /// LIBERO pack: `sim assets install libero`), then 10 idle steps.
+    #[arg(long)]
+    libero_init: bool,
     /// No progress bar.
     #[arg(long)]
     quiet: bool,
@@ -218,6 +222,7 @@ fn run_tasks(
         record: args.record.clone(),
         viz,
         viz_every: args.viz_every,
+        libero_init: args.libero_init,
     };
     let total = (tasks.len() * cfg.episodes) as u64;
     let bar = if args.quiet {

@@ -190,3 +190,55 @@ fn expert_scaling_table_over_repetitions() {
             .unwrap();
     assert_eq!(rows.as_array().unwrap().len(), 2);
 }
+
+#[test]
+fn libero_init_without_the_pack_names_the_install_command() {
+    let tmp = tempfile::tempdir().unwrap();
+    let out = Command::new(env!("CARGO_BIN_EXE_eval"))
+        .args([
+            "--policy",
+            "zero",
+            "--tasks",
+            "libero_goal/put_the_bowl_on_the_plate",
+            "--libero-init",
+            "--episodes",
+            "1",
+            "--out",
+        ])
+        .arg(tmp.path().join("out"))
+        .env("LIBERO_MEM_CACHE", tmp.path())
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(2), "{err}");
+    assert!(err.contains("assets install libero"), "{err}");
+    assert!(!tmp.path().join("out").join("results.json").exists());
+}
+
+/// With the LIBERO pack installed: LIBERO's protocol (init state k, 10 idle steps) and the expert
+/// still solves the task from those starts.
+#[test]
+fn expert_from_libero_init_states() {
+    if sim::pack::LiberoPack::locate_default().is_err() {
+        eprintln!("LIBERO pack not installed; skipping");
+        return;
+    }
+    let tmp = tempfile::tempdir().unwrap();
+    let (code, out, err) = eval(&[
+        "--policy",
+        "expert",
+        "--tasks",
+        "libero_goal/put_the_bowl_on_the_plate",
+        "--libero-init",
+        "--episodes",
+        "2",
+        "--quiet",
+        "--out",
+        tmp.path().to_str().unwrap(),
+    ]);
+    assert_eq!(code, 0, "{err}");
+    assert!(
+        out.contains("| libero_goal/put_the_bowl_on_the_plate | 2 | 100.0 ± 0.0 | 100.0"),
+        "{out}"
+    );
+}
