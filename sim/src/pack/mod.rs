@@ -6,6 +6,7 @@
 //! all 130 LIBERO tasks with both language strings, and the init-state reader
 //! ([`pickle::InitStates`]). Building those scenes from LIBERO's meshes is not done yet.
 
+pub mod compose;
 pub mod install;
 pub mod pickle;
 
