@@ -202,7 +202,25 @@ impl Env {
     /// A shipped or user task: its scene, and its goal tracked at every step (reported in
     /// [`Observation::goal`]). Every `:init` and `:goal` atom is checked against the scene here.
     pub fn from_task(task: &TaskSpec, cfg: EnvConfig) -> Result<Env, EnvError> {
-        let scene = Scene::build(SceneSpec::from_problem(&task.problem))?;
+        Self::from_task_with_assets(task, cfg, crate::pack::AssetPack::Builtin)
+    }
+
+    /// [`Env::from_task`] with the objects and fixtures from an asset pack: `Builtin` (the
+    /// primitives) or `Libero` (LIBERO's meshes and collision boxes from the installed pack, same names,
+    /// joints and region sites, so predicates, init states and the tracker work unchanged).
+    pub fn from_task_with_assets(
+        task: &TaskSpec,
+        cfg: EnvConfig,
+        assets: crate::pack::AssetPack,
+    ) -> Result<Env, EnvError> {
+        let pack = match assets {
+            crate::pack::AssetPack::Builtin => None,
+            crate::pack::AssetPack::Libero => Some(
+                crate::pack::LiberoPack::locate_default()
+                    .map_err(|e| EnvError::Config(e.to_string()))?,
+            ),
+        };
+        let scene = Scene::build_with(SceneSpec::from_problem(&task.problem), pack.as_ref())?;
         for a in task.problem.init.iter().chain(task.problem.goal.atoms()) {
             scene.check_atom(&a.predicate, &a.args)?;
         }

@@ -282,6 +282,33 @@ impl std::fmt::Debug for Scene {
 
 /// Builds the MJCF of the arena, robot, objects and fixtures of `spec`.
 pub fn compose_xml(spec: &SceneSpec) -> Result<String, SceneError> {
+    compose_xml_with(spec, None)
+}
+
+/// The MJCF of `spec` with its objects and fixtures from LIBERO's asset pack when `pack` is given
+/// (same names, joints and region sites as the builtin assets, LIBERO's meshes and collision boxes),
+/// else from the builtin primitives.
+pub fn compose_xml_with(
+    spec: &SceneSpec,
+    pack: Option<&crate::pack::LiberoPack>,
+) -> Result<String, SceneError> {
+    let mut extra_assets = String::new();
+    let mut body = |def: &AssetDef, name: &str, pos: [f64; 3]| -> Result<String, SceneError> {
+        match pack {
+            None => Ok(assets::instance_xml(def, name, pos, [1.0, 0.0, 0.0, 0.0])),
+            Some(pack) => {
+                let o = crate::pack::compose::LiberoObject::load(pack, def.category)
+                    .map_err(|e| SceneError::Init(e.to_string()))?;
+                extra_assets.push_str(&o.asset_xml(name));
+                Ok(o.body_xml(
+                    name,
+                    pos,
+                    [1.0, 0.0, 0.0, 0.0],
+                    def.kind == AssetKind::Movable,
+                ))
+            }
+        }
+    };
     let arena = Arena::from_class(&spec.problem_class)?;
     let ws = arena.workspace();
     let mut zones = String::new();
@@ -320,12 +347,7 @@ pub fn compose_xml(spec: &SceneSpec) -> Result<String, SceneError> {
                 o.name, o.category
             )));
         }
-        bodies.push_str(&assets::instance_xml(
-            def,
-            &o.name,
-            [0.0, 0.0, 1.5],
-            [1.0, 0.0, 0.0, 0.0],
-        ));
+        bodies.push_str(&body(def, &o.name, [0.0, 0.0, 1.5])?);
     }
     for fx in &spec.fixtures {
         if assets::WORKSPACE_CATEGORIES.contains(&fx.category.as_str()) || fx.name == ws {
@@ -338,19 +360,31 @@ pub fn compose_xml(spec: &SceneSpec) -> Result<String, SceneError> {
                 fx.name, fx.category
             )));
         }
-        bodies.push_str(&assets::instance_xml(
-            def,
-            &fx.name,
-            [0.0, 0.0, -2.0],
-            [1.0, 0.0, 0.0, 0.0],
-        ));
+        bodies.push_str(&body(def, &fx.name, [0.0, 0.0, -2.0])?);
     }
-    Ok(world_xml(arena, &spec.problem_class, &zones, &bodies))
+    Ok(world_xml_with_assets(
+        arena,
+        &spec.problem_class,
+        &zones,
+        &bodies,
+        &extra_assets,
+    ))
 }
 
 /// The MJCF of an arena (floor, walls, lights, table with its TargetZone sites `zones`, cameras) with the
 /// Panda and the given extra `<body>` elements, in LIBERO's assembly order.
 pub fn world_xml(arena: Arena, model_name: &str, zones: &str, bodies: &str) -> String {
+    world_xml_with_assets(arena, model_name, zones, bodies, "")
+}
+
+/// [`world_xml`] with extra `<asset>` children (meshes, textures, materials of the bodies).
+pub fn world_xml_with_assets(
+    arena: Arena,
+    model_name: &str,
+    zones: &str,
+    bodies: &str,
+    extra_assets: &str,
+) -> String {
     let ws = arena.workspace();
     let panda = panda_xml(BASE_POS);
     let (wall, floor1, floor2, table) = match arena {
@@ -377,7 +411,7 @@ pub fn world_xml(arena: Arena, model_name: &str, zones: &str, bodies: &str) -> S
 <material name="floor_mat" texture="floor_tex" texrepeat="12 12" reflectance="0"/>
 <material name="table_mat" rgba="{table}" reflectance="0"/>
 <material name="wall_mat" rgba="{wall}" reflectance="0"/>
-</asset>
+{extra_assets}</asset>
 <default>
 {defaults}</default>
 <worldbody>
@@ -422,8 +456,16 @@ fn lookup(inst: &InstanceSpec) -> Result<&'static AssetDef, SceneError> {
 impl Scene {
     /// Composes and compiles the world of `spec`.
     pub fn build(spec: SceneSpec) -> Result<Scene, SceneError> {
+        Self::build_with(spec, None)
+    }
+
+    /// [`Scene::build`] with the objects and fixtures from LIBERO's asset pack when `pack` is given.
+    pub fn build_with(
+        spec: SceneSpec,
+        pack: Option<&crate::pack::LiberoPack>,
+    ) -> Result<Scene, SceneError> {
         let arena = Arena::from_class(&spec.problem_class)?;
-        let xml = compose_xml(&spec)?;
+        let xml = compose_xml_with(&spec, pack)?;
         let model = Arc::new(Model::from_xml_str(&xml)?);
         let ws = arena.workspace();
         let mut instances = Vec::new();

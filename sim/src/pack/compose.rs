@@ -284,7 +284,11 @@ impl LiberoObject {
         out
     }
 
-    /// The body `<instance>_main` at `pos`/`quat` (wxyz), with a free joint when `movable`.
+    /// The body `<instance>_main` at `pos`/`quat` (wxyz): with a free joint `<instance>_joint0`
+    /// (damping 0.0005) when `movable`, else a mocap body (welded; posed at reset), as the builtin
+    /// scenes place fixtures. Collision geoms get this crate's collision bits (objects; fixture frames;
+    /// fixture parts under a joint), and geoms outside group 0 get `mass="0"` unless they state a
+    /// mass, which is what LIBERO's `inertiagrouprange="0 0"` does.
     pub fn body_xml(&self, instance: &str, pos: [f64; 3], quat: [f64; 4], movable: bool) -> String {
         let mut b = self.body.clone();
         b.set("name", "main".into());
@@ -294,6 +298,10 @@ impl LiberoObject {
             "quat",
             format!("{} {} {} {}", quat[0], quat[1], quat[2], quat[3]),
         );
+        collision_bits(&mut b, movable, false);
+        // LIBERO's `_post_process` shows a stove's `burner` site only while it is on; the env draws
+        // that glow itself, so the site starts invisible (as the builtin stove's).
+        hide_site(&mut b, &format!("{instance}_burner"));
         if movable {
             b.children.insert(
                 0,
@@ -307,10 +315,57 @@ impl LiberoObject {
                     children: vec![],
                 },
             );
+        } else {
+            b.set("mocap", "true".into());
         }
         let mut out = String::new();
         b.write(&mut out, 1);
         out
+    }
+}
+
+fn hide_site(e: &mut Element, name: &str) {
+    for c in &mut e.children {
+        if c.tag == "site" && c.attr("name") == Some(name) {
+            let rgba = c.attr("rgba").unwrap_or("0.5 0.5 0.5 1").to_string();
+            let mut v: Vec<&str> = rgba.split_whitespace().collect();
+            if v.len() == 4 {
+                v[3] = "0";
+                c.set("rgba", v.join(" "));
+            }
+        }
+        hide_site(c, name);
+    }
+}
+
+/// Sets contype/conaffinity of colliding geoms and zeroes the mass of non-group-0 geoms.
+fn collision_bits(b: &mut Element, movable: bool, under_joint: bool) {
+    use crate::assets::bits;
+    let under_joint = under_joint || b.children.iter().any(|c| c.tag == "joint");
+    for c in &mut b.children {
+        match c.tag.as_str() {
+            "geom" => {
+                let group = c.attr("group").unwrap_or("0").to_string();
+                if group != "0" && c.attr("mass").is_none() {
+                    c.set("mass", "0".into());
+                }
+                let visual_only =
+                    c.attr("contype") == Some("0") && c.attr("conaffinity") == Some("0");
+                if !visual_only {
+                    let (t, a) = if movable {
+                        (bits::OBJECT_TYPE, bits::OBJECT_AFFINITY)
+                    } else if under_joint {
+                        (bits::PART_TYPE, bits::FIXTURE_AFFINITY)
+                    } else {
+                        (bits::FRAME_TYPE, bits::FIXTURE_AFFINITY)
+                    };
+                    c.set("contype", t.to_string());
+                    c.set("conaffinity", a.to_string());
+                }
+            }
+            "body" => collision_bits(c, movable, under_joint),
+            _ => {}
+        }
     }
 }
 
