@@ -114,6 +114,8 @@ pub struct EvalConfig {
     /// LIBERO pack), fixtures placed from the episode seed, then 10 idle steps (OpenVLA's
     /// `num_steps_wait`) before the policy acts.
     pub libero_init: bool,
+    /// Asset pack the scenes are built from (builtin primitives or LIBERO's meshes).
+    pub assets: sim::pack::AssetPack,
 }
 
 /// Idle steps after an init state under [`EvalConfig::libero_init`] (OpenVLA's `num_steps_wait`).
@@ -131,6 +133,7 @@ impl Default for EvalConfig {
             viz: None,
             viz_every: 4,
             libero_init: false,
+            assets: sim::pack::AssetPack::Builtin,
         }
     }
 }
@@ -269,7 +272,7 @@ pub fn run_episode(
 /// An environment configured for `policy` (rendering only when it needs images or when recording).
 pub fn env_for(task: &TaskSpec, policy: &dyn Policy, cfg: &EvalConfig) -> Result<Env, EvalError> {
     let record = cfg.record.is_some();
-    Ok(Env::from_task(
+    Ok(Env::from_task_with_assets(
         task,
         EnvConfig {
             render: policy.needs_images() || record,
@@ -282,7 +285,12 @@ pub fn env_for(task: &TaskSpec, policy: &dyn Policy, cfg: &EvalConfig) -> Result
             },
             ..EnvConfig::default()
         },
-    )?)
+        cfg.assets,
+    )
+    .map_err(|e| match e {
+        sim::EnvError::Config(m) => EvalError::Argument(m),
+        other => other.into(),
+    })?)
 }
 
 /// Progress of [`evaluate`], reported after every episode.

@@ -112,6 +112,10 @@ struct EvalArgs {
     /// LIBERO pack: `sim assets install libero`), then 10 idle steps.
     #[arg(long)]
     libero_init: bool,
+    /// Asset pack of the scenes: builtin (primitives) or libero (LIBERO's meshes; needs
+    /// `sim assets install libero`).
+    #[arg(long, default_value = "builtin")]
+    assets: String,
     /// No progress bar.
     #[arg(long)]
     quiet: bool,
@@ -223,6 +227,7 @@ fn run_tasks(
         viz,
         viz_every: args.viz_every,
         libero_init: args.libero_init,
+        assets: args.assets.parse().map_err(EvalError::Argument)?,
     };
     let total = (tasks.len() * cfg.episodes) as u64;
     let bar = if args.quiet {

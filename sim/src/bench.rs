@@ -180,3 +180,51 @@ fn raw_loop(model: &std::sync::Arc<Model>, ids: &PandaIds, steps: usize) -> Resu
     }
     Ok(steps as f64 / t0.elapsed().as_secs_f64())
 }
+
+/// Env throughput on a task scene, per asset pack.
+#[derive(Debug, Clone, serde::Serialize)]
+pub struct TaskBench {
+    /// Task id.
+    pub task: String,
+    /// Asset pack (`builtin` or `libero`).
+    pub assets: String,
+    /// `Env::step` calls per second with two 128×128 RGB cameras.
+    pub env_steps_per_s: f64,
+    /// `Env::step` calls per second without rendering.
+    pub env_state_only_steps_per_s: f64,
+    /// Control steps measured per figure.
+    pub steps: usize,
+}
+
+/// Env steps/s on `task` built from `assets`, with two 128² cameras and without rendering.
+pub fn run_task(
+    task: &crate::task::TaskSpec,
+    assets: crate::pack::AssetPack,
+    steps: usize,
+) -> Result<TaskBench, EnvError> {
+    let steps = steps.max(10);
+    let rate = |render: bool| -> Result<f64, EnvError> {
+        let cfg = EnvConfig {
+            render,
+            image_size: 128,
+            ..EnvConfig::default()
+        };
+        let mut env = Env::from_task_with_assets(task, cfg, assets)?;
+        env.reset(0)?;
+        let t0 = Instant::now();
+        for t in 0..steps {
+            env.step(&action(t))?;
+        }
+        Ok(steps as f64 / t0.elapsed().as_secs_f64())
+    };
+    Ok(TaskBench {
+        task: task.id.clone(),
+        assets: match assets {
+            crate::pack::AssetPack::Builtin => "builtin".into(),
+            crate::pack::AssetPack::Libero => "libero".into(),
+        },
+        env_steps_per_s: rate(true)?,
+        env_state_only_steps_per_s: rate(false)?,
+        steps,
+    })
+}

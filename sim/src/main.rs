@@ -112,6 +112,10 @@ enum Command {
         /// Render an MJCF file instead of the built-in scene.
         #[arg(long)]
         mjcf: Option<PathBuf>,
+        /// Asset pack of the task scene: builtin (primitives) or libero (LIBERO's meshes; needs
+        /// `sim assets install libero`).
+        #[arg(long, default_value = "builtin")]
+        assets: String,
         /// Start from LIBERO's init state K of the task (needs the LIBERO pack; the task must have
         /// LIBERO's qpos layout, as the builtin libero_goal scenes do); fixtures still come from --seed.
         #[arg(long, requires = "task")]
@@ -155,6 +159,12 @@ enum Command {
         /// llvmpipe worker threads (LP_NUM_THREADS); 0 renders on the calling thread, i.e. one core.
         #[arg(long, default_value_t = 0)]
         gl_threads: usize,
+        /// Measure a task scene instead (Env steps/s with two 128² cameras and without rendering).
+        #[arg(long)]
+        task: Option<String>,
+        /// Asset pack of the task scene: builtin, libero, or both (one row each).
+        #[arg(long, default_value = "both")]
+        assets: String,
     },
 }
 
@@ -203,6 +213,7 @@ fn render_start(
 fn render_init(
     task: &sim::task::TaskSpec,
     cfg: EnvConfig,
+    assets: sim::pack::AssetPack,
     seed: u64,
     k: usize,
     camera: &str,
@@ -212,7 +223,7 @@ fn render_init(
     let states = pack
         .init_states(&task.id)
         .map_err(|e| BadInput(e.to_string()))?;
-    let mut env = Env::from_task(task, cfg).map_err(classify)?;
+    let mut env = Env::from_task_with_assets(task, cfg, assets).map_err(classify)?;
     let (nq, nv) = (env.model().nq(), env.model().nv());
     let state = states
         .state(k, nq, nv)
@@ -402,7 +413,9 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             mjcf,
             quality,
             init,
+            assets,
         } => {
+            let assets: sim::pack::AssetPack = assets.parse().map_err(BadInput)?;
             if size == 0 || size > 4096 {
                 return Err(
                     BadInput(format!("--size must be between 1 and 4096, got {size}")).into(),
@@ -422,8 +435,13 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                         ..EnvConfig::default()
                     };
                     match init {
-                        None => render_start(Env::from_task(&spec, cfg), seed, &camera, size)?,
-                        Some(k) => render_init(&spec, cfg, seed, k, &camera, size)?,
+                        None => render_start(
+                            Env::from_task_with_assets(&spec, cfg, assets),
+                            seed,
+                            &camera,
+                            size,
+                        )?,
+                        Some(k) => render_init(&spec, cfg, assets, seed, k, &camera, size)?,
                     }
                 }
                 (None, Some(path)) => {
@@ -456,9 +474,33 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             steps,
             rounds,
             gl_threads,
+            task,
+            assets,
         } => {
             // SAFETY: set before any thread or GL context exists; llvmpipe reads it when the context is made.
             unsafe { std::env::set_var("LP_NUM_THREADS", gl_threads.to_string()) };
+            if let Some(id) = task {
+                let spec = sim::task::resolve(&id).map_err(|e| BadInput(e.to_string()))?;
+                let packs = match assets.as_str() {
+                    "both" => vec![sim::pack::AssetPack::Builtin, sim::pack::AssetPack::Libero],
+                    other => vec![other.parse().map_err(BadInput)?],
+                };
+                let mut rows = Vec::new();
+                for p in packs {
+                    rows.push(sim::bench::run_task(&spec, p, steps).map_err(classify)?);
+                }
+                if json {
+                    println!("{}", serde_json::to_string(&rows)?);
+                } else {
+                    for r in &rows {
+                        println!(
+                            "{} [{}]: env steps/s {:.1} (2×128² RGB), {:.1} without rendering",
+                            r.task, r.assets, r.env_steps_per_s, r.env_state_only_steps_per_s
+                        );
+                    }
+                }
+                return Ok(());
+            }
             let r = sim::bench::run(steps, rounds).map_err(classify)?;
             if json {
                 println!("{}", serde_json::to_string(&r)?);
