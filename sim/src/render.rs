@@ -431,6 +431,7 @@ impl Renderer {
             });
         }
         crate::mujoco::init()?;
+        let _gl_guard = gl_lock();
         let gl = GlContext::new()?;
         // A shallow copy of the model struct (arrays shared, read-only) with our offscreen size and MSAA:
         // mjr_makeContext only reads it, and the shared model stays untouched.
@@ -587,6 +588,7 @@ impl Renderer {
                 available: self.camera_names.join(", "),
             });
         }
+        let _gl_guard = gl_lock();
         self.gl.make_current();
         let mut cam = std::mem::MaybeUninit::<ffi::mjvCamera>::uninit();
         // SAFETY: mjv_defaultCamera initialises the struct.
@@ -746,6 +748,7 @@ impl Renderer {
 
 impl Drop for Renderer {
     fn drop(&mut self) {
+        let _gl_guard = gl_lock();
         self.gl.make_current();
         // SAFETY: both were allocated in `new`; freed once, with the context current.
         unsafe {
@@ -753,6 +756,16 @@ impl Drop for Renderer {
             ffi::mjv_freeScene(&mut *self.scene);
         }
     }
+}
+
+/// One GL caller at a time, process-wide. Every renderer has its own context, but all of them live on
+/// one EGL display, i.e. one Mesa screen, and llvmpipe crashed (SIGSEGV under `mjr_readPixels`) when two
+/// simulator threads rendered at the same moment (seen while generating T3 with 2 workers). Context
+/// creation, rendering and freeing are therefore serialised; physics stays parallel, and llvmpipe still
+/// rasterises each frame on its own threads.
+fn gl_lock() -> std::sync::MutexGuard<'static, ()> {
+    static GL: std::sync::Mutex<()> = std::sync::Mutex::new(());
+    GL.lock().unwrap_or_else(|p| p.into_inner())
 }
 
 /// Reverses the row order of a `[height, width, channels]` buffer (OpenGL rows are bottom-up).
