@@ -6,7 +6,8 @@
 //! name = "t3"                       # run name: runs/<name>/ (default: the file stem)
 //! [data]
 //! dir = "datasets/t3"               # relative to the working directory
-//! generate = { task = "t3", episodes = 50, val = 5, seed = 0 }   # when `dir` is missing
+//! generate = { task = "t3", episodes = 50, val = 5, seed = 0 }   # when `dir` has no index.json
+//!                                   # (+ image_size = 128, workers = N: camera side, threads)
 //! [model]
 //! variant = "e_slotssm"             # e_slotssm | e_slotssm_oracle | slotvla_h<N> | dense | dense_h<N>
 //! preset = "tiny"                   # tiny | full
@@ -74,20 +75,37 @@ fn yes() -> bool {
     true
 }
 
-/// `[data].generate`: what `sim generate --task --episodes --val --seed --out` should produce.
+/// `[data].generate`: what `sim generate --task --episodes --val --seed --size --workers --out`
+/// would produce (the same files, byte for byte: generation is a function of the seed).
 #[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct GenerateSpec {
-    /// Task id or alias (`t1` … `t10`, `libero_goal/<stem>`).
+    /// Task id or alias (`t1` … `t10`, `t3@12`, `libero_goal/<stem>`).
     pub task: String,
-    /// Number of episodes.
+    /// Number of episodes (train + validation).
     pub episodes: usize,
-    /// Episodes held out for validation.
+    /// Episodes held out for validation (< `episodes`).
     #[serde(default)]
     pub val: usize,
-    /// Seed of the first episode.
+    /// Base seed of the episodes.
     #[serde(default)]
     pub seed: u64,
+    /// Camera image side recorded (default 128, as `sim generate`); training windows resize the
+    /// frames to the model's `image_size`, so one dataset serves every model size.
+    #[serde(default = "default_camera", skip_serializing_if = "is_default_camera")]
+    pub image_size: usize,
+    /// Simulator worker threads (default: the available cores, at most 8); the files do not
+    /// depend on it.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub workers: Option<usize>,
+}
+
+fn default_camera() -> usize {
+    128
+}
+
+fn is_default_camera(s: &usize) -> bool {
+    *s == default_camera()
 }
 
 /// Model size preset.
@@ -285,6 +303,17 @@ impl Config {
         }
         if t.grad_clip < 0.0 || t.weight_decay < 0.0 {
             return bad("grad_clip / weight_decay", "must be ≥ 0");
+        }
+        if let Some(g) = &self.data.generate {
+            if g.episodes == 0 || g.val >= g.episodes {
+                return Err(format!(
+                    "data.generate: need episodes ≥ 1 and val < episodes (got {} and {})",
+                    g.episodes, g.val
+                ));
+            }
+            if g.image_size < 8 || g.workers == Some(0) {
+                return Err("data.generate: image_size must be ≥ 8 and workers ≥ 1".into());
+            }
         }
         if self.data.window == Some(0) {
             return Err("data.window: must be ≥ 1".into());

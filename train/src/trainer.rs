@@ -234,7 +234,7 @@ pub fn train(cfg: &Config, opts: &TrainOptions) -> Result<TrainSummary> {
     let device = backend::device(cfg.backend.kind)?;
     let ad = device.clone().autodiff();
 
-    ensure_dataset(&cfg)?;
+    ensure_dataset(&cfg, opts.progress)?;
     let index = data::DatasetIndex::load(&cfg.data.dir)?;
     let vocab = RunData::model_vocab(&index)?;
     let mcfg: ModelConfig = cfg.model_config(vocab).map_err(|m| config_error(&cfg, m))?;

@@ -269,26 +269,82 @@ fn bad_config_key_is_an_error_naming_key_and_file_exit_2() {
 fn missing_dataset_exits_2_naming_the_directory() {
     let dir = tempfile::tempdir().unwrap();
     let mut cfg = common::tiny_config(&dir.path().join("no_such_dataset"));
-    for generate in [false, true] {
-        cfg.data.generate = generate.then(|| train::config::GenerateSpec {
-            task: "t1".into(),
-            episodes: 2,
-            val: 0,
-            seed: 0,
-        });
-        let p = write_config(dir.path(), &cfg);
-        let out = train_bin(&[
-            p.to_str().unwrap(),
-            "--run-dir",
-            dir.path().join("run").to_str().unwrap(),
-        ]);
-        let stderr = String::from_utf8_lossy(&out.stderr);
-        assert_eq!(out.status.code(), Some(2), "{stderr}");
-        assert!(
-            stderr.contains("dataset missing") && stderr.contains("no_such_dataset"),
-            "{stderr}"
-        );
+    let p = write_config(dir.path(), &cfg);
+    let run = dir.path().join("run");
+    let out = train_bin(&[p.to_str().unwrap(), "--run-dir", run.to_str().unwrap()]);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(2), "{stderr}");
+    assert!(
+        stderr.contains("dataset missing") && stderr.contains("no_such_dataset"),
+        "{stderr}"
+    );
+    // Generation of a task the simulator does not know is bad input too.
+    cfg.data.generate = Some(generate_spec("t99"));
+    let p = write_config(dir.path(), &cfg);
+    let out = train_bin(&[p.to_str().unwrap(), "--run-dir", run.to_str().unwrap()]);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(2), "{stderr}");
+    assert!(
+        stderr.contains("data.generate") && stderr.contains("t99"),
+        "{stderr}"
+    );
+}
+
+/// Two 32² episodes of `task`, one of them held out, on two simulator threads.
+fn generate_spec(task: &str) -> train::config::GenerateSpec {
+    train::config::GenerateSpec {
+        task: task.into(),
+        episodes: 2,
+        val: 1,
+        seed: 0,
+        image_size: 32,
+        workers: Some(2),
     }
+}
+
+#[test]
+fn missing_dataset_is_generated_through_the_simulator_then_trained_on() {
+    let dir = tempfile::tempdir().unwrap();
+    let data_dir = dir.path().join("t1");
+    let mut cfg = common::tiny_config(&data_dir);
+    cfg.data.generate = Some(generate_spec("t1"));
+    let p = write_config(dir.path(), &cfg);
+    let run = dir.path().join("run");
+    let out = train_bin(&[
+        p.to_str().unwrap(),
+        "--run-dir",
+        run.to_str().unwrap(),
+        "--steps",
+        "3",
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let index = data::DatasetIndex::load(&data_dir).unwrap();
+    assert_eq!(index.episodes.len(), 2);
+    assert_eq!(index.split(data::Split::Val).len(), 1);
+    assert!(index.episodes.iter().all(|e| e.length > 20));
+    assert!(index.vocab.len() > 2, "instruction words in the vocabulary");
+    assert_eq!(metrics::read(&run.join("metrics.jsonl")).unwrap().len(), 3);
+    // The same files as `sim generate` with the same arguments; a second call finds the index
+    // and leaves them alone.
+    let modified = |f: &str| {
+        std::fs::metadata(data_dir.join(f))
+            .unwrap()
+            .modified()
+            .unwrap()
+    };
+    let before = modified(&index.episodes[0].file);
+    train::dataset::ensure_dataset(&cfg, false).unwrap();
+    assert_eq!(modified(&index.episodes[0].file), before);
+    // A generation killed half-way resumes: the index and one episode gone → only it is redone.
+    std::fs::remove_file(data_dir.join(data::index::INDEX_FILE)).unwrap();
+    std::fs::remove_file(data_dir.join(&index.episodes[1].file)).unwrap();
+    train::dataset::ensure_dataset(&cfg, false).unwrap();
+    assert_eq!(modified(&index.episodes[0].file), before);
+    assert_eq!(data::DatasetIndex::load(&data_dir).unwrap(), index);
 }
 
 #[test]
