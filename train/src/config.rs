@@ -15,6 +15,14 @@
 //! decoder = { layers = 3 }
 //! [train]
 //! steps = 20000
+//! [[train.stages]]                  # optional staged training (see `Stage`)
+//! name = "slots"
+//! steps = 2000
+//! losses = ["slot_recon", "contrastive"]
+//! freeze = ["decoder"]
+//! [[train.stages]]
+//! name = "all"
+//! losses = ["action", "contrastive", "window", "slot_recon"]
 //! [backend]
 //! kind = "flex"                     # flex | ndarray (feature `ndarray`) | wgpu (feature `wgpu`)
 //! [eval]
@@ -188,6 +196,39 @@ pub struct TrainSection {
     pub val_batches: usize,
     /// Loss weights.
     pub loss_weights: LossWeights,
+    /// Staged training (empty = one stage: every loss, nothing frozen); see [`Stage`].
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub stages: Vec<Stage>,
+}
+
+/// `[[train.stages]]`: one stage of staged training. Stages run in order for their `steps`
+/// (the last one runs until `[train].steps`); the learning-rate schedule spans the whole run.
+///
+/// ```toml
+/// [[train.stages]]
+/// name = "slots"                    # slot attention learns objects first
+/// steps = 2000
+/// losses = ["slot_recon", "contrastive"]
+/// freeze = ["decoder", "slot_ssm"]
+/// [[train.stages]]
+/// name = "action"                   # then everything, every loss
+/// losses = ["action", "contrastive", "window", "slot_recon"]
+/// ```
+#[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Stage {
+    /// Name (metrics and progress bar).
+    pub name: String,
+    /// Optimiser steps of this stage (may be left out for the last one).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub steps: Option<u64>,
+    /// Loss terms summed (with their λ) into this stage's total: `action`, `contrastive`,
+    /// `window`, `slot_recon`.
+    pub losses: Vec<String>,
+    /// Model parts whose weights stay fixed (fields of `model::PolicyModel`: `encoder`,
+    /// `slot_attention`, `slot_ssm`, `window_head`, `fusion`, `relation`, `decoder`, `text`, …).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub freeze: Vec<String>,
 }
 
 impl Default for TrainSection {
@@ -208,6 +249,7 @@ impl Default for TrainSection {
             val_every: 1000,
             val_batches: 8,
             loss_weights: LossWeights::default(),
+            stages: Vec::new(),
         }
     }
 }
@@ -315,6 +357,7 @@ impl Config {
                 return Err("data.generate: image_size must be ≥ 8 and workers ≥ 1".into());
             }
         }
+        crate::stages::check(&t.stages)?;
         if self.data.window == Some(0) {
             return Err("data.window: must be ≥ 1".into());
         }
@@ -447,6 +490,22 @@ variant = "e_slotssm"
         });
         // Round trip through the resolved TOML.
         assert_eq!(Config::parse(&c.to_toml()).unwrap(), c);
+    }
+
+    #[test]
+    fn stages_parse_round_trip_and_name_bad_keys() {
+        let text = format!(
+            "{MIN}[[train.stages]]\nname = \"slots\"\nsteps = 5\nlosses = [\"slot_recon\"]\nfreeze = [\"decoder\"]\n[[train.stages]]\nname = \"all\"\nlosses = [\"action\"]\n"
+        );
+        let c = Config::parse(&text).unwrap();
+        assert_eq!(c.train.stages.len(), 2);
+        assert_eq!(c.train.stages[0].freeze, ["decoder"]);
+        assert_eq!(c.train.stages[1].steps, None);
+        assert_eq!(Config::parse(&c.to_toml()).unwrap(), c);
+        let e = Config::parse(&text.replace("freeze", "frezee")).unwrap_err();
+        assert!(e.contains("frezee"), "{e}");
+        let e = Config::parse(&text.replace("\"decoder\"", "\"decodr\"")).unwrap_err();
+        assert!(e.contains("train.stages[0]") && e.contains("decodr"), "{e}");
     }
 
     #[test]

@@ -374,3 +374,130 @@ fn incompatible_checkpoint_exits_2() {
     ]);
     assert_eq!(out.status.code(), Some(2));
 }
+
+/// Bits of every float parameter of one model part (`train::stages::MODULES`).
+fn part_bits(model: &PolicyModel, part: &str) -> Vec<Vec<u32>> {
+    struct Collect(Vec<Vec<u32>>);
+    impl ModuleVisitor for Collect {
+        fn visit_float<const D: usize>(&mut self, p: &Param<Tensor<D>>) {
+            let v = p.val().into_data().try_to_vec::<f32>().unwrap();
+            self.0.push(v.iter().map(|x| x.to_bits()).collect());
+        }
+    }
+    let mut c = Collect(vec![]);
+    train::stages::visit_part(model, part, &mut c);
+    assert!(!c.0.is_empty(), "{part} has no parameters");
+    c.0
+}
+
+fn checkpoint_model(run_dir: &Path, step: u64) -> PolicyModel {
+    let cfg: ModelConfig =
+        serde_json::from_str(&std::fs::read_to_string(run_dir.join("model.json")).unwrap())
+            .unwrap();
+    let path = run_dir
+        .join("checkpoints")
+        .join(train::checkpoint::dir_name(step))
+        .join("model.bpk");
+    PolicyModel::load(&cfg, path, &Device::flex()).unwrap()
+}
+
+#[test]
+fn staged_training_trains_only_the_stage_parts_and_resumes_across_stages() {
+    let _g = serial();
+    let mut cfg = short_config(8, 1);
+    let stages = r#"
+[[stages]]
+name = "slots"
+steps = 4
+losses = ["slot_recon", "contrastive", "window"]
+freeze = ["encoder"]
+[[stages]]
+name = "all"
+losses = ["action", "contrastive", "window", "slot_recon"]
+"#;
+    #[derive(serde::Deserialize)]
+    struct S {
+        stages: Vec<train::config::Stage>,
+    }
+    cfg.train.stages = toml::from_str::<S>(stages).unwrap().stages;
+    let (a, b) = (tempfile::tempdir().unwrap(), tempfile::tempdir().unwrap());
+    train::train(&cfg, &opts(a.path())).unwrap();
+
+    // Checkpoints after steps 1 and 4 (both in stage 1; the initial weights are not at hand:
+    // Burn initialises parameters lazily, in the order of first use), and after step 8.
+    let (s1, s4, s8) = (
+        checkpoint_model(a.path(), 1),
+        checkpoint_model(a.path(), 4),
+        checkpoint_model(a.path(), 8),
+    );
+    let same =
+        |x: &PolicyModel, y: &PolicyModel, part: &str| part_bits(x, part) == part_bits(y, part);
+    // Stage 1: the frozen encoder and the action decoder (no action loss) keep their weights
+    // bit for bit (AdamW's weight decay alone would move them); the slot side learns.
+    for part in ["encoder", "decoder"] {
+        assert!(same(&s1, &s4, part), "{part} moved in stage 1");
+    }
+    for part in ["slot_attention", "slot_ssm", "slot_decoder"] {
+        assert!(!same(&s1, &s4, part), "{part} did not learn in stage 1");
+    }
+    // Stage 2 trains everything.
+    for part in ["encoder", "decoder", "slot_attention"] {
+        assert!(!same(&s4, &s8, part), "{part} did not learn in stage 2");
+    }
+    let recs = metrics::read(&a.path().join("metrics.jsonl")).unwrap();
+    let names: Vec<&str> = recs.iter().map(|r| r.stage.as_deref().unwrap()).collect();
+    assert_eq!(
+        names,
+        ["slots"; 4]
+            .into_iter()
+            .chain(["all"; 4])
+            .collect::<Vec<_>>()
+    );
+
+    // Stopped inside stage 1, resumed: the same weights as the uninterrupted run.
+    let stop = TrainOptions {
+        stop_at: Some(3),
+        ..opts(b.path())
+    };
+    train::train(&cfg, &stop).unwrap();
+    let s = train::train(&cfg, &opts(b.path())).unwrap();
+    assert_eq!((s.start_step, s.step), (3, 8));
+    assert_eq!(
+        bits(&final_weights(a.path())),
+        bits(&final_weights(b.path()))
+    );
+}
+
+#[test]
+fn backend_not_compiled_in_or_unknown_exits_2() {
+    let dir = tempfile::tempdir().unwrap();
+    let p = write_config(dir.path(), &common::tiny_config(dataset()));
+    let run = dir.path().join("run");
+    let mut missing = vec![];
+    if cfg!(not(feature = "ndarray")) {
+        missing.push("ndarray");
+    }
+    if cfg!(not(feature = "wgpu")) {
+        missing.push("wgpu");
+    }
+    for b in missing {
+        let out = train_bin(&[
+            p.to_str().unwrap(),
+            "--run-dir",
+            run.to_str().unwrap(),
+            "--backend",
+            b,
+        ]);
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(2), "{stderr}");
+        assert!(
+            stderr.contains(&format!("--features train/{b}")),
+            "{stderr}"
+        );
+    }
+    let out = train_bin(&[p.to_str().unwrap(), "--backend", "cuda"]);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(2), "{stderr}");
+    assert!(stderr.contains("cuda"), "{stderr}");
+    assert!(!run.exists(), "nothing written before the backend check");
+}
