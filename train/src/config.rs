@@ -102,8 +102,8 @@ pub struct GenerateSpec {
     /// frames to the model's `image_size`, so one dataset serves every model size.
     #[serde(default = "default_camera", skip_serializing_if = "is_default_camera")]
     pub image_size: usize,
-    /// Simulator worker threads (default: the available cores, at most 8); the files do not
-    /// depend on it.
+    /// Simulator worker threads (default 1: two rendering threads have crashed in Mesa's
+    /// llvmpipe); the files do not depend on it.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub workers: Option<usize>,
 }

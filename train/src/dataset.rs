@@ -44,12 +44,9 @@ pub fn ensure_dataset(cfg: &Config, progress: bool) -> Result<()> {
 pub fn generate_dataset(spec: &GenerateSpec, dir: &Path, progress: bool) -> Result<DatasetIndex> {
     let bad = |message: String| TrainError::Usage(format!("data.generate: {message}"));
     let task = sim::task::resolve(&spec.task).map_err(|e| bad(e.to_string()))?;
-    let workers = spec.workers.unwrap_or_else(|| {
-        std::thread::available_parallelism()
-            .map(|n| n.get())
-            .unwrap_or(1)
-            .min(8)
-    });
+    // One simulator thread unless asked: with two, Mesa's llvmpipe has crashed (SIGSEGV in
+    // mjr_readPixels) in about one of five 30-episode runs here; a rerun resumes.
+    let workers = spec.workers.unwrap_or(1);
     let gen_cfg = sim::generate::GenerateConfig {
         episodes: spec.episodes,
         val: spec.val,

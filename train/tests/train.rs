@@ -290,7 +290,7 @@ fn missing_dataset_exits_2_naming_the_directory() {
     );
 }
 
-/// Two 32² episodes of `task`, one of them held out, on two simulator threads.
+/// Two 32² episodes of `task`, one of them held out, on one simulator thread.
 fn generate_spec(task: &str) -> train::config::GenerateSpec {
     train::config::GenerateSpec {
         task: task.into(),
@@ -298,7 +298,7 @@ fn generate_spec(task: &str) -> train::config::GenerateSpec {
         val: 1,
         seed: 0,
         image_size: 32,
-        workers: Some(2),
+        workers: None,
     }
 }
 
