@@ -3,7 +3,9 @@
 use burn::prelude::Device;
 
 use crate::config::BackendKind;
-use crate::error::{Result, TrainError};
+use crate::error::Result;
+#[cfg(not(all(feature = "ndarray", feature = "wgpu")))]
+use crate::error::TrainError;
 
 /// The plain (inference) device of `kind`; train on `device(kind)?.autodiff()`.
 ///

@@ -6,7 +6,8 @@
 //! name = "t3"                       # run name: runs/<name>/ (default: the file stem)
 //! [data]
 //! dir = "datasets/t3"               # relative to the working directory
-//! generate = { task = "t3", episodes = 50, val = 5, seed = 0 }   # when `dir` is missing
+//! generate = { task = "t3", episodes = 50, val = 5, seed = 0 }   # when `dir` has no index.json
+//!                                   # (+ image_size = 128, workers = N: camera side, threads)
 //! [model]
 //! variant = "e_slotssm"             # e_slotssm | e_slotssm_oracle | slotvla_h<N> | dense | dense_h<N>
 //! preset = "tiny"                   # tiny | full
@@ -14,6 +15,14 @@
 //! decoder = { layers = 3 }
 //! [train]
 //! steps = 20000
+//! [[train.stages]]                  # optional staged training (see `Stage`)
+//! name = "slots"
+//! steps = 2000
+//! losses = ["slot_recon", "contrastive"]
+//! freeze = ["decoder"]
+//! [[train.stages]]
+//! name = "all"
+//! losses = ["action", "contrastive", "window", "slot_recon"]
 //! [backend]
 //! kind = "flex"                     # flex | ndarray (feature `ndarray`) | wgpu (feature `wgpu`)
 //! [eval]
@@ -74,20 +83,37 @@ fn yes() -> bool {
     true
 }
 
-/// `[data].generate`: what `sim generate --task --episodes --val --seed --out` should produce.
+/// `[data].generate`: what `sim generate --task --episodes --val --seed --size --workers --out`
+/// would produce (the same files, byte for byte: generation is a function of the seed).
 #[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct GenerateSpec {
-    /// Task id or alias (`t1` … `t10`, `libero_goal/<stem>`).
+    /// Task id or alias (`t1` … `t10`, `t3@12`, `libero_goal/<stem>`).
     pub task: String,
-    /// Number of episodes.
+    /// Number of episodes (train + validation).
     pub episodes: usize,
-    /// Episodes held out for validation.
+    /// Episodes held out for validation (< `episodes`).
     #[serde(default)]
     pub val: usize,
-    /// Seed of the first episode.
+    /// Base seed of the episodes.
     #[serde(default)]
     pub seed: u64,
+    /// Camera image side recorded (default 128, as `sim generate`); training windows resize the
+    /// frames to the model's `image_size`, so one dataset serves every model size.
+    #[serde(default = "default_camera", skip_serializing_if = "is_default_camera")]
+    pub image_size: usize,
+    /// Simulator worker threads (default 1: two rendering threads have crashed in Mesa's
+    /// llvmpipe); the files do not depend on it.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub workers: Option<usize>,
+}
+
+fn default_camera() -> usize {
+    128
+}
+
+fn is_default_camera(s: &usize) -> bool {
+    *s == default_camera()
 }
 
 /// Model size preset.
@@ -170,6 +196,39 @@ pub struct TrainSection {
     pub val_batches: usize,
     /// Loss weights.
     pub loss_weights: LossWeights,
+    /// Staged training (empty = one stage: every loss, nothing frozen); see [`Stage`].
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub stages: Vec<Stage>,
+}
+
+/// `[[train.stages]]`: one stage of staged training. Stages run in order for their `steps`
+/// (the last one runs until `[train].steps`); the learning-rate schedule spans the whole run.
+///
+/// ```toml
+/// [[train.stages]]
+/// name = "slots"                    # slot attention learns objects first
+/// steps = 2000
+/// losses = ["slot_recon", "contrastive"]
+/// freeze = ["decoder", "slot_ssm"]
+/// [[train.stages]]
+/// name = "action"                   # then everything, every loss
+/// losses = ["action", "contrastive", "window", "slot_recon"]
+/// ```
+#[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Stage {
+    /// Name (metrics and progress bar).
+    pub name: String,
+    /// Optimiser steps of this stage (may be left out for the last one).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub steps: Option<u64>,
+    /// Loss terms summed (with their λ) into this stage's total: `action`, `contrastive`,
+    /// `window`, `slot_recon`.
+    pub losses: Vec<String>,
+    /// Model parts whose weights stay fixed (fields of `model::PolicyModel`: `encoder`,
+    /// `slot_attention`, `slot_ssm`, `window_head`, `fusion`, `relation`, `decoder`, `text`, …).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub freeze: Vec<String>,
 }
 
 impl Default for TrainSection {
@@ -190,6 +249,7 @@ impl Default for TrainSection {
             val_every: 1000,
             val_batches: 8,
             loss_weights: LossWeights::default(),
+            stages: Vec::new(),
         }
     }
 }
@@ -286,6 +346,18 @@ impl Config {
         if t.grad_clip < 0.0 || t.weight_decay < 0.0 {
             return bad("grad_clip / weight_decay", "must be ≥ 0");
         }
+        if let Some(g) = &self.data.generate {
+            if g.episodes == 0 || g.val >= g.episodes {
+                return Err(format!(
+                    "data.generate: need episodes ≥ 1 and val < episodes (got {} and {})",
+                    g.episodes, g.val
+                ));
+            }
+            if g.image_size < 8 || g.workers == Some(0) {
+                return Err("data.generate: image_size must be ≥ 8 and workers ≥ 1".into());
+            }
+        }
+        crate::stages::check(&t.stages)?;
         if self.data.window == Some(0) {
             return Err("data.window: must be ≥ 1".into());
         }
@@ -418,6 +490,22 @@ variant = "e_slotssm"
         });
         // Round trip through the resolved TOML.
         assert_eq!(Config::parse(&c.to_toml()).unwrap(), c);
+    }
+
+    #[test]
+    fn stages_parse_round_trip_and_name_bad_keys() {
+        let text = format!(
+            "{MIN}[[train.stages]]\nname = \"slots\"\nsteps = 5\nlosses = [\"slot_recon\"]\nfreeze = [\"decoder\"]\n[[train.stages]]\nname = \"all\"\nlosses = [\"action\"]\n"
+        );
+        let c = Config::parse(&text).unwrap();
+        assert_eq!(c.train.stages.len(), 2);
+        assert_eq!(c.train.stages[0].freeze, ["decoder"]);
+        assert_eq!(c.train.stages[1].steps, None);
+        assert_eq!(Config::parse(&c.to_toml()).unwrap(), c);
+        let e = Config::parse(&text.replace("freeze", "frezee")).unwrap_err();
+        assert!(e.contains("frezee"), "{e}");
+        let e = Config::parse(&text.replace("\"decoder\"", "\"decodr\"")).unwrap_err();
+        assert!(e.contains("train.stages[0]") && e.contains("decodr"), "{e}");
     }
 
     #[test]

@@ -8,6 +8,7 @@ use burn::data::dataloader::batcher::Batcher;
 use burn::prelude::*;
 use data::burn_adapter::WindowBatcher;
 use data::{DatasetIndex, Split, WindowConfig, WindowDataset};
+use indicatif::{ProgressBar, ProgressStyle};
 use rand::SeedableRng;
 use rand::seq::SliceRandom;
 use rand_chacha::ChaCha8Rng;
@@ -19,39 +20,80 @@ use crate::error::{Result, TrainError};
 const MAX_OBJECTS: usize = 8;
 
 /// Makes sure `[data].dir` holds a dataset: present → nothing to do; missing with
-/// `[data].generate` → [`generate_dataset`]; missing without → [`TrainError::DatasetMissing`].
-pub fn ensure_dataset(cfg: &Config) -> Result<()> {
+/// `[data].generate` → [`generate_dataset`] (with a progress bar when `progress`); missing
+/// without → [`TrainError::DatasetMissing`].
+pub fn ensure_dataset(cfg: &Config, progress: bool) -> Result<()> {
     let dir = &cfg.data.dir;
     if dir.join(data::index::INDEX_FILE).is_file() {
         return Ok(());
     }
     match &cfg.data.generate {
-        Some(spec) => generate_dataset(spec, dir),
+        Some(spec) => generate_dataset(spec, dir, progress).map(|_| ()),
         None => Err(TrainError::DatasetMissing {
             dir: dir.clone(),
             hint: "no index.json there and `[data].generate` is not set; record episodes with \
-                   `sim generate` and index them with `data stats DIR`"
+                   `sim generate --task T --out DIR` (it writes the index)"
                 .into(),
         }),
     }
 }
 
-/// Generates `spec` into `dir` through the simulator. The one place to wire `sim`'s generation
-/// API in once it lands on main; until then a missing dataset is a clear error (exit 2) that
-/// says which command makes it.
-pub fn generate_dataset(spec: &GenerateSpec, dir: &Path) -> Result<()> {
-    Err(TrainError::DatasetMissing {
-        dir: dir.to_path_buf(),
-        hint: format!(
-            "generation through the simulator is not available in this build yet; run \
-             `sim generate --task {} --episodes {} --val {} --seed {} --out {}`",
-            spec.task,
-            spec.episodes,
-            spec.val,
-            spec.seed,
-            dir.display()
-        ),
+/// Generates `spec` into `dir` with the simulator's scripted expert (`sim::generate`): the same
+/// files as `sim generate` with the same arguments; resumable (finished episodes are kept, so an
+/// interrupted generation continues where it stopped); writes the dataset index last.
+pub fn generate_dataset(spec: &GenerateSpec, dir: &Path, progress: bool) -> Result<DatasetIndex> {
+    let bad = |message: String| TrainError::Usage(format!("data.generate: {message}"));
+    let task = sim::task::resolve(&spec.task).map_err(|e| bad(e.to_string()))?;
+    // One simulator thread unless asked: with two, Mesa's llvmpipe has crashed (SIGSEGV in
+    // mjr_readPixels) in about one of five 30-episode runs here; a rerun resumes.
+    let workers = spec.workers.unwrap_or(1);
+    let gen_cfg = sim::generate::GenerateConfig {
+        episodes: spec.episodes,
+        val: spec.val,
+        seed: spec.seed,
+        workers,
+        image_size: spec.image_size,
+        ..Default::default()
+    };
+    let bar = if progress {
+        let b = ProgressBar::new(spec.episodes as u64);
+        b.set_style(
+            ProgressStyle::with_template(
+                "generating {prefix} {bar:30} {pos}/{len} episodes  {msg}  ETA {eta}",
+            )
+            .expect("valid template"),
+        );
+        b.set_prefix(task.id.clone());
+        b
+    } else {
+        ProgressBar::hidden()
+    };
+    let started = std::time::Instant::now();
+    let index = sim::generate::generate(&task, dir, &gen_cfg, &|p| {
+        bar.set_position(p.done as u64);
+        bar.set_message(format!(
+            "{} ok, {} failed attempts",
+            p.successes, p.failures
+        ));
     })
+    .map_err(|e| match e {
+        sim::generate::GenerateError::Argument(m) => bad(m),
+        sim::generate::GenerateError::Data(d) => TrainError::Data(d),
+        other => TrainError::Other(format!("generating {}: {other}", dir.display())),
+    })?;
+    bar.finish_and_clear();
+    if progress {
+        let steps: usize = index.episodes.iter().map(|e| e.length).sum();
+        eprintln!(
+            "generated {}: {} episodes ({steps} steps, {}² frames) in {} in {:.1} s",
+            task.id,
+            index.episodes.len(),
+            spec.image_size,
+            dir.display(),
+            started.elapsed().as_secs_f64()
+        );
+    }
+    Ok(index)
 }
 
 /// Train and validation windows of a dataset, with the batcher.

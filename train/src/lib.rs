@@ -21,6 +21,7 @@ pub mod error;
 pub mod metrics;
 pub mod plot;
 pub mod schedule;
+pub mod stages;
 pub mod trainer;
 
 pub use config::{BackendKind, Config};

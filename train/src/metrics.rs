@@ -38,6 +38,9 @@ pub struct Record {
     /// Seconds this step spent reading and batching windows.
     #[serde(default)]
     pub data_s: f64,
+    /// Name of the training stage (staged training only; `loss` is then that stage's total).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub stage: Option<String>,
 }
 
 impl Record {

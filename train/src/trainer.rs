@@ -30,6 +30,7 @@ use crate::error::{Result, TrainError};
 use crate::metrics::{self, JsonlWriter, Record};
 use crate::plot;
 use crate::schedule::WarmupCosine;
+use crate::stages;
 
 /// Command-line choices that override or complement the config.
 #[derive(Clone, Debug, Default)]
@@ -111,6 +112,7 @@ fn record(step: u64, l: &Losses) -> Record {
         grad_norm: 0.0,
         time_s: 0.0,
         data_s: 0.0,
+        stage: None,
     }
 }
 
@@ -234,7 +236,7 @@ pub fn train(cfg: &Config, opts: &TrainOptions) -> Result<TrainSummary> {
     let device = backend::device(cfg.backend.kind)?;
     let ad = device.clone().autodiff();
 
-    ensure_dataset(&cfg)?;
+    ensure_dataset(&cfg, opts.progress)?;
     let index = data::DatasetIndex::load(&cfg.data.dir)?;
     let vocab = RunData::model_vocab(&index)?;
     let mcfg: ModelConfig = cfg.model_config(vocab).map_err(|m| config_error(&cfg, m))?;
@@ -362,10 +364,31 @@ pub fn train(cfg: &Config, opts: &TrainOptions) -> Result<TrainSummary> {
         let (_, losses) = model.forward(&batch)?;
         let mut rec = record(state.step + 1, &losses);
         rec.data_s = data_s;
+        let stage = stages::active(&t.stages, state.step).map(|(_, s)| s);
+        let total = match stage {
+            Some(s) => {
+                let total = stages::total(s, &losses, &mcfg.loss).ok_or_else(|| {
+                    config_error(
+                        &cfg,
+                        format!(
+                            "train.stages `{}`: the {} model computes none of its losses {:?}",
+                            s.name, cfg.model.variant, s.losses
+                        ),
+                    )
+                })?;
+                rec.loss = scalar(&total);
+                rec.stage = Some(s.name.clone());
+                total
+            }
+            None => losses.total,
+        };
         if !rec.loss.is_finite() {
             return Err(TrainError::NonFinite(state.step + 1));
         }
-        let mut grads = GradientsParams::from_grads(losses.total.backward(), &model);
+        let mut grads = GradientsParams::from_grads(total.backward(), &model);
+        if let Some(s) = stage {
+            stages::freeze(&model, s, &mut grads);
+        }
         rec.grad_norm = clip_global_norm(&model, &mut grads, t.grad_clip);
         rec.lr = sched.lr(state.step);
         model = optim.step(rec.lr, model, grads);
@@ -378,7 +401,10 @@ pub fn train(cfg: &Config, opts: &TrainOptions) -> Result<TrainSummary> {
             recent.remove(0);
         }
         bar.set_position(state.step);
-        bar.set_message(format!("loss {:.4}", rec.loss));
+        bar.set_message(match &rec.stage {
+            Some(name) => format!("{name}: loss {:.4}", rec.loss),
+            None => format!("loss {:.4}", rec.loss),
+        });
 
         if val_due(state.step) {
             if let Some(v) = validate(

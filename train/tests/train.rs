@@ -269,26 +269,82 @@ fn bad_config_key_is_an_error_naming_key_and_file_exit_2() {
 fn missing_dataset_exits_2_naming_the_directory() {
     let dir = tempfile::tempdir().unwrap();
     let mut cfg = common::tiny_config(&dir.path().join("no_such_dataset"));
-    for generate in [false, true] {
-        cfg.data.generate = generate.then(|| train::config::GenerateSpec {
-            task: "t1".into(),
-            episodes: 2,
-            val: 0,
-            seed: 0,
-        });
-        let p = write_config(dir.path(), &cfg);
-        let out = train_bin(&[
-            p.to_str().unwrap(),
-            "--run-dir",
-            dir.path().join("run").to_str().unwrap(),
-        ]);
-        let stderr = String::from_utf8_lossy(&out.stderr);
-        assert_eq!(out.status.code(), Some(2), "{stderr}");
-        assert!(
-            stderr.contains("dataset missing") && stderr.contains("no_such_dataset"),
-            "{stderr}"
-        );
+    let p = write_config(dir.path(), &cfg);
+    let run = dir.path().join("run");
+    let out = train_bin(&[p.to_str().unwrap(), "--run-dir", run.to_str().unwrap()]);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(2), "{stderr}");
+    assert!(
+        stderr.contains("dataset missing") && stderr.contains("no_such_dataset"),
+        "{stderr}"
+    );
+    // Generation of a task the simulator does not know is bad input too.
+    cfg.data.generate = Some(generate_spec("t99"));
+    let p = write_config(dir.path(), &cfg);
+    let out = train_bin(&[p.to_str().unwrap(), "--run-dir", run.to_str().unwrap()]);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(2), "{stderr}");
+    assert!(
+        stderr.contains("data.generate") && stderr.contains("t99"),
+        "{stderr}"
+    );
+}
+
+/// Two 32² episodes of `task`, one of them held out, on one simulator thread.
+fn generate_spec(task: &str) -> train::config::GenerateSpec {
+    train::config::GenerateSpec {
+        task: task.into(),
+        episodes: 2,
+        val: 1,
+        seed: 0,
+        image_size: 32,
+        workers: None,
     }
+}
+
+#[test]
+fn missing_dataset_is_generated_through_the_simulator_then_trained_on() {
+    let dir = tempfile::tempdir().unwrap();
+    let data_dir = dir.path().join("t1");
+    let mut cfg = common::tiny_config(&data_dir);
+    cfg.data.generate = Some(generate_spec("t1"));
+    let p = write_config(dir.path(), &cfg);
+    let run = dir.path().join("run");
+    let out = train_bin(&[
+        p.to_str().unwrap(),
+        "--run-dir",
+        run.to_str().unwrap(),
+        "--steps",
+        "3",
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let index = data::DatasetIndex::load(&data_dir).unwrap();
+    assert_eq!(index.episodes.len(), 2);
+    assert_eq!(index.split(data::Split::Val).len(), 1);
+    assert!(index.episodes.iter().all(|e| e.length > 20));
+    assert!(index.vocab.len() > 2, "instruction words in the vocabulary");
+    assert_eq!(metrics::read(&run.join("metrics.jsonl")).unwrap().len(), 3);
+    // The same files as `sim generate` with the same arguments; a second call finds the index
+    // and leaves them alone.
+    let modified = |f: &str| {
+        std::fs::metadata(data_dir.join(f))
+            .unwrap()
+            .modified()
+            .unwrap()
+    };
+    let before = modified(&index.episodes[0].file);
+    train::dataset::ensure_dataset(&cfg, false).unwrap();
+    assert_eq!(modified(&index.episodes[0].file), before);
+    // A generation killed half-way resumes: the index and one episode gone → only it is redone.
+    std::fs::remove_file(data_dir.join(data::index::INDEX_FILE)).unwrap();
+    std::fs::remove_file(data_dir.join(&index.episodes[1].file)).unwrap();
+    train::dataset::ensure_dataset(&cfg, false).unwrap();
+    assert_eq!(modified(&index.episodes[0].file), before);
+    assert_eq!(data::DatasetIndex::load(&data_dir).unwrap(), index);
 }
 
 #[test]
@@ -317,4 +373,131 @@ fn incompatible_checkpoint_exits_2() {
         "--resume",
     ]);
     assert_eq!(out.status.code(), Some(2));
+}
+
+/// Bits of every float parameter of one model part (`train::stages::MODULES`).
+fn part_bits(model: &PolicyModel, part: &str) -> Vec<Vec<u32>> {
+    struct Collect(Vec<Vec<u32>>);
+    impl ModuleVisitor for Collect {
+        fn visit_float<const D: usize>(&mut self, p: &Param<Tensor<D>>) {
+            let v = p.val().into_data().try_to_vec::<f32>().unwrap();
+            self.0.push(v.iter().map(|x| x.to_bits()).collect());
+        }
+    }
+    let mut c = Collect(vec![]);
+    train::stages::visit_part(model, part, &mut c);
+    assert!(!c.0.is_empty(), "{part} has no parameters");
+    c.0
+}
+
+fn checkpoint_model(run_dir: &Path, step: u64) -> PolicyModel {
+    let cfg: ModelConfig =
+        serde_json::from_str(&std::fs::read_to_string(run_dir.join("model.json")).unwrap())
+            .unwrap();
+    let path = run_dir
+        .join("checkpoints")
+        .join(train::checkpoint::dir_name(step))
+        .join("model.bpk");
+    PolicyModel::load(&cfg, path, &Device::flex()).unwrap()
+}
+
+#[test]
+fn staged_training_trains_only_the_stage_parts_and_resumes_across_stages() {
+    let _g = serial();
+    let mut cfg = short_config(8, 1);
+    let stages = r#"
+[[stages]]
+name = "slots"
+steps = 4
+losses = ["slot_recon", "contrastive", "window"]
+freeze = ["encoder"]
+[[stages]]
+name = "all"
+losses = ["action", "contrastive", "window", "slot_recon"]
+"#;
+    #[derive(serde::Deserialize)]
+    struct S {
+        stages: Vec<train::config::Stage>,
+    }
+    cfg.train.stages = toml::from_str::<S>(stages).unwrap().stages;
+    let (a, b) = (tempfile::tempdir().unwrap(), tempfile::tempdir().unwrap());
+    train::train(&cfg, &opts(a.path())).unwrap();
+
+    // Checkpoints after steps 1 and 4 (both in stage 1; the initial weights are not at hand:
+    // Burn initialises parameters lazily, in the order of first use), and after step 8.
+    let (s1, s4, s8) = (
+        checkpoint_model(a.path(), 1),
+        checkpoint_model(a.path(), 4),
+        checkpoint_model(a.path(), 8),
+    );
+    let same =
+        |x: &PolicyModel, y: &PolicyModel, part: &str| part_bits(x, part) == part_bits(y, part);
+    // Stage 1: the frozen encoder and the action decoder (no action loss) keep their weights
+    // bit for bit (AdamW's weight decay alone would move them); the slot side learns.
+    for part in ["encoder", "decoder"] {
+        assert!(same(&s1, &s4, part), "{part} moved in stage 1");
+    }
+    for part in ["slot_attention", "slot_ssm", "slot_decoder"] {
+        assert!(!same(&s1, &s4, part), "{part} did not learn in stage 1");
+    }
+    // Stage 2 trains everything.
+    for part in ["encoder", "decoder", "slot_attention"] {
+        assert!(!same(&s4, &s8, part), "{part} did not learn in stage 2");
+    }
+    let recs = metrics::read(&a.path().join("metrics.jsonl")).unwrap();
+    let names: Vec<&str> = recs.iter().map(|r| r.stage.as_deref().unwrap()).collect();
+    assert_eq!(
+        names,
+        ["slots"; 4]
+            .into_iter()
+            .chain(["all"; 4])
+            .collect::<Vec<_>>()
+    );
+
+    // Stopped inside stage 1, resumed: the same weights as the uninterrupted run.
+    let stop = TrainOptions {
+        stop_at: Some(3),
+        ..opts(b.path())
+    };
+    train::train(&cfg, &stop).unwrap();
+    let s = train::train(&cfg, &opts(b.path())).unwrap();
+    assert_eq!((s.start_step, s.step), (3, 8));
+    assert_eq!(
+        bits(&final_weights(a.path())),
+        bits(&final_weights(b.path()))
+    );
+}
+
+#[test]
+fn backend_not_compiled_in_or_unknown_exits_2() {
+    let dir = tempfile::tempdir().unwrap();
+    let p = write_config(dir.path(), &common::tiny_config(dataset()));
+    let run = dir.path().join("run");
+    let mut missing = vec![];
+    if cfg!(not(feature = "ndarray")) {
+        missing.push("ndarray");
+    }
+    if cfg!(not(feature = "wgpu")) {
+        missing.push("wgpu");
+    }
+    for b in missing {
+        let out = train_bin(&[
+            p.to_str().unwrap(),
+            "--run-dir",
+            run.to_str().unwrap(),
+            "--backend",
+            b,
+        ]);
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(2), "{stderr}");
+        assert!(
+            stderr.contains(&format!("--features train/{b}")),
+            "{stderr}"
+        );
+    }
+    let out = train_bin(&[p.to_str().unwrap(), "--backend", "cuda"]);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(2), "{stderr}");
+    assert!(stderr.contains("cuda"), "{stderr}");
+    assert!(!run.exists(), "nothing written before the backend check");
 }
