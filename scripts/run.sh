@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
 # The main job on the built-in defaults: set-up, the simulator's self-check, then the furthest chain that
-# works end to end today — generate expert demonstrations of T1, train the tiny config on them, and print
+# works end to end today — train the tiny config (which first records its T1 expert demonstrations through
+# the simulator when datasets/tiny is missing), and print
 # the subgoal table of a closed-loop evaluation of its checkpoint.
 # Everything builds in the dev profile (dependencies optimised), shared with `scripts/test.sh`.
 set -euo pipefail
@@ -11,6 +12,5 @@ cargo build -q -p sim -p train -p eval
 BIN=target/debug
 "$BIN/sim" info
 "$BIN/sim" render --out out/agentview.png --task t1 --seed 0 --size 128
-"$BIN/sim" generate --task t1 --episodes 6 --val 1 --seed 0 --out datasets/tiny --workers 2
 "$BIN/train" configs/tiny.toml --run-dir runs/tiny
 "$BIN/eval" --run runs/tiny --tasks t1 --episodes 2 --workers 2
