@@ -21,3 +21,4 @@ pub mod predicates;
 pub mod record;
 pub mod scene;
 pub mod sheet;
+pub mod aliasing;

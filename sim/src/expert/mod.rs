@@ -315,14 +315,20 @@ impl Expert {
                 return Some(clip(a));
             }
             if std::env::var_os("SIM_EXPERT_TRACE").is_some() {
+                let q: Vec<f64> = scene
+                    .instances
+                    .iter()
+                    .flat_map(|i| i.joints.iter().map(|&(_, adr, _)| env.data().qpos()[adr]))
+                    .collect();
                 eprintln!(
-                    "  step {:>3} op {:>2} done after {:>3} steps: {:?} eef {:.3?} sat {}",
+                    "  step {:>3} op {:>2} done after {:>3} steps: {:?} eef {:.3?} sat {} q {:.3?}",
                     obs.step,
                     self.cur,
                     self.op_steps,
                     short(&self.ops[self.cur]),
                     obs.eef_pos,
-                    sat
+                    sat,
+                    q
                 );
             }
             self.cur += 1;

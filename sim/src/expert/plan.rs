@@ -280,13 +280,8 @@ impl<'a> Builder<'a> {
             }
             "turnon" => {
                 if let Some(stove) = self.inst(&atom.args[0]) {
-                    self.turn_knob(stove);
+                    self.turn_knob(stove, n);
                 }
-                self.ops.push(Op::WaitSatisfied {
-                    n,
-                    max: 30,
-                    grip: OPEN,
-                });
             }
             _ => {}
         }
@@ -716,49 +711,69 @@ impl<'a> Builder<'a> {
         });
     }
 
-    /// Turn a stove knob on by pushing its pointer bar around the axis with the closed fingers.
-    fn turn_knob(&mut self, stove: usize) {
-        let b = self.scene.instances[stove].root_body;
+    /// Turn a stove knob on: pinch its pointer bar across its thickness with the hand yawed along the
+    /// bar, then twist the wrist about the knob's axis.
+    fn turn_knob(&mut self, stove: usize, n: usize) {
         let Some(knob) = self.scene.model.id(
             ObjType::Body,
             &format!("{}_knob", self.scene.instances[stove].name),
         ) else {
             return;
         };
-        let _ = b;
         let c = self.env.data().body_pos(knob);
         let q = self.env.data().body_quat(knob);
-        // Bar along the knob's local y; a +z rotation moves its +y end towards local −x. The closed
-        // fingertips go down beside the bar (+x side, near its +y end) and push along −x until on.
-        let yb = 0.012 + self.jit(0.002);
-        let z = c[2] + 0.030;
-        // Fingers closed throughout (grip_now() follows `held`).
-        self.held = Some(stove);
+        // The bar runs along the knob's local y; the fingers (opening along world y at yaw 0) must close
+        // across it, i.e. along the knob's local x.
+        let bx = qrot(q, [1.0, 0.0, 0.0]);
+        let bar_yaw = bx[1].atan2(bx[0]) - std::f64::consts::FRAC_PI_2;
+        let yaw0 = wrap_half_turn(bar_yaw);
+        let z = c[2] + 0.026 + self.jit(0.002);
         self.ops.push(Op::Grip {
-            cmd: CLOSE,
+            cmd: OPEN,
             steps: 0,
         });
-        let start = qrot(q, [0.024, yb, 0.0]);
-        let pre = [c[0] + start[0], c[1] + start[1], z + 0.06];
+        let pre = [c[0], c[1], z + 0.07];
         self.mv(Target::Grip(Point::Abs(pre)), 0.015, 80, 12.0);
-        self.mv(
-            Target::Grip(Point::Abs([pre[0], pre[1], z])),
-            0.005,
-            30,
-            10.0,
-        );
-        let end = qrot(q, [-0.03, yb, 0.0]);
-        self.ops.push(Op::Move {
-            target: Target::Grip(Point::Abs([c[0] + end[0], c[1] + end[1], z])),
+        self.yaw = yaw0;
+        self.ops.push(Op::Yaw {
+            yaw: yaw0,
+            grip: OPEN,
+            max: 30,
+        });
+        self.mv(Target::Grip(Point::Abs([c[0], c[1], z])), 0.004, 40, 10.0);
+        self.ops.push(Op::Grip {
+            cmd: CLOSE,
+            steps: 10,
+        });
+        // Positive knob angle = counter-clockwise about the (upward) knob axis.
+        let turn = 0.75 + self.jit(0.05);
+        self.yaw = yaw0 + turn;
+        self.ops.push(Op::Yaw {
+            yaw: self.yaw,
             grip: CLOSE,
-            tol: 0.004,
-            max: 80,
-            gain: 14.0,
-            until_pending: true,
+            max: 40,
+        });
+        self.ops.push(Op::WaitSatisfied {
+            n,
+            max: 20,
+            grip: CLOSE,
+        });
+        self.ops.push(Op::Grip {
+            cmd: OPEN,
+            steps: 8,
         });
         self.mv(Target::Rel([0.0, 0.0, 0.07]), 0.015, 25, 12.0);
-        self.held = None;
     }
+}
+
+/// An angle wrapped into (−π/2, π/2] (a parallel gripper is symmetric under a half turn).
+fn wrap_half_turn(a: f64) -> f64 {
+    let pi = std::f64::consts::PI;
+    let mut a = a.rem_euclid(pi);
+    if a > pi / 2.0 {
+        a -= pi;
+    }
+    a
 }
 
 /// The ±y side of `obj` whose neighbourhood is freer: the hand (20 cm long along y) reaches past the
