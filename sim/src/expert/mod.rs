@@ -320,15 +320,22 @@ impl Expert {
                     .iter()
                     .flat_map(|i| i.joints.iter().map(|&(_, adr, _)| env.data().qpos()[adr]))
                     .collect();
+                let objs: Vec<[f64; 3]> = scene
+                    .instances
+                    .iter()
+                    .filter(|i| i.def.kind == crate::assets::AssetKind::Movable)
+                    .map(|i| env.data().body_pos(i.root_body))
+                    .collect();
                 eprintln!(
-                    "  step {:>3} op {:>2} done after {:>3} steps: {:?} eef {:.3?} sat {} q {:.3?}",
+                    "  step {:>3} op {:>2} done after {:>3} steps: {:?} eef {:.3?} sat {} q {:.3?} objs {:.3?}",
                     obs.step,
                     self.cur,
                     self.op_steps,
                     short(&self.ops[self.cur]),
                     obs.eef_pos,
                     sat,
-                    q
+                    q,
+                    objs
                 );
             }
             self.cur += 1;
