@@ -311,6 +311,16 @@ impl Expert {
                 return Some([0.0, 0.0, 0.0, 0.0, 0.0, 0.0, -1.0]);
             }
             if let Some(a) = self.exec(scene, env, obs) {
+                if std::env::var("SIM_EXPERT_TRACE").is_ok_and(|v| v == "2") {
+                    eprintln!(
+                        "    step {:>3} op {:>2} eef {:.3?} fingers {:.4?} act {:.2?}",
+                        obs.step,
+                        self.cur,
+                        obs.eef_pos,
+                        &obs.state[6..8],
+                        a
+                    );
+                }
                 self.op_steps += 1;
                 return Some(clip(a));
             }

@@ -374,7 +374,9 @@ impl<'a> Builder<'a> {
         };
         let far =
             self.cat(obj) == "akita_black_bowl" && horizontal_reach(self.expected_pos(obj)) > 0.72;
-        let want_yaw = if far {
+        let want_yaw = if far
+            || (self.cat(obj) == "wine_bottle" && self.hand_blocked_along_y(self.expected_pos(obj)))
+        {
             std::f64::consts::FRAC_PI_2
         } else {
             0.0
@@ -406,6 +408,30 @@ impl<'a> Builder<'a> {
         self.held = Some(obj);
         let p = self.pos(obj);
         self.held_grasp_xy = Some([p[0], p[1]]);
+    }
+
+    /// Whether the hand (20 cm long along its finger axis) would meet a tall fixture when held with that
+    /// axis along y over `p` while the same hand along x would not.
+    fn hand_blocked_along_y(&self, p: [f64; 3]) -> bool {
+        let clearance = |dx: f64, dy: f64| -> f64 {
+            let mut best = f64::MAX;
+            for inst in &self.scene.instances {
+                let rad = match inst.def.category {
+                    "wine_rack" => 0.19,
+                    "wooden_cabinet" => 0.17,
+                    _ => continue,
+                };
+                let q = self.env.data().body_pos(inst.root_body);
+                for t in [-1.0, -0.5, 0.0, 0.5, 1.0] {
+                    let g = [p[0] + t * dx, p[1] + t * dy];
+                    let d = ((q[0] - g[0]).powi(2) + (q[1] - g[1]).powi(2)).sqrt() - rad;
+                    best = best.min(d);
+                }
+            }
+            best
+        };
+        let along_y = clearance(0.0, 0.1);
+        along_y < 0.0 && clearance(0.1, 0.0) > along_y
     }
 
     fn release(&mut self) {
@@ -444,6 +470,7 @@ impl<'a> Builder<'a> {
         }
         let into_basket =
             drop && matches!(&to, Point::Site { .. }) && self.cat(obj) == "cream_cheese";
+        let to = self.within_reach(to);
         if let Point::Body { inst, .. } = &to {
             let p = self.pos(*inst);
             self.expected.push((obj, p));
@@ -580,6 +607,32 @@ impl<'a> Builder<'a> {
         self.pause(CLOSE);
         if next_obj != Some(obj) {
             self.release();
+        }
+    }
+
+    /// A large raised surface (the cabinet top) near the edge of the reach: move the target towards the
+    /// shoulder, keeping 4.5 cm inside the region.
+    fn within_reach(&self, to: Point) -> Point {
+        let Point::Site { site, off } = to else {
+            return to;
+        };
+        let s = self.env.data().site_pos(site);
+        let half = self.scene.model.site_size(site);
+        let far = horizontal_reach(s) - 0.6;
+        if far <= 0.0 || half[0].min(half[1]) < 0.08 {
+            return Point::Site { site, off };
+        }
+        let (ux, uy) = (SHOULDER[0] - s[0], SHOULDER[1] - s[1]);
+        let n = (ux * ux + uy * uy).sqrt();
+        let mut d = [ux / n * far, uy / n * far];
+        // Sites of fixtures placed at yaw 0 or π: half sizes stay along x and y.
+        for k in 0..2 {
+            let lim = half[k] - 0.045;
+            d[k] = d[k].clamp(-lim, lim);
+        }
+        Point::Site {
+            site,
+            off: [off[0] + d[0], off[1] + d[1], off[2]],
         }
     }
 
