@@ -684,9 +684,11 @@ fn wooden_cabinet(out: &mut String, p: &str) {
             let mut h = geoms(g.out, p, [0.75, 0.72, 0.65, 1.0]);
             part_bits(&mut h);
             h.n = n0 + 5;
-            h.bx([0.0, dy0 - 0.026, zc], [0.035, 0.005, 0.006], 0.0);
-            h.bx([0.03, dy0 - 0.018, zc], [0.004, 0.007, 0.005], 0.0);
-            h.bx([-0.03, dy0 - 0.018, zc], [0.004, 0.007, 0.005], 0.0);
+            // A 5 cm bar standing 2.5 cm proud of the front on two posts: room for a fingertip behind it
+            // and for the fingers around its ends.
+            h.bx([0.0, dy0 - 0.042, zc], [0.025, 0.005, 0.006], 0.0);
+            h.bx([0.017, dy0 - 0.0245, zc], [0.004, 0.0125, 0.005], 0.0);
+            h.bx([-0.017, dy0 - 0.0245, zc], [0.004, 0.0125, 0.005], 0.0);
         }
         site(
             out,

@@ -135,6 +135,23 @@ pub enum Op {
         /// Step limit.
         max: usize,
     },
+    /// Rotate the hand to `Rtilt · Rz(yaw) · R0` (R0 the initial orientation, Rtilt a rotation by `tilt`
+    /// radians about the horizontal axis `axis`), keeping the grip site in place; later moves hold that
+    /// orientation while `hold` (until the next `Orient`).
+    Orient {
+        /// Yaw about world z.
+        yaw: f64,
+        /// Horizontal tilt axis (world, unit).
+        axis: [f64; 3],
+        /// Tilt angle.
+        tilt: f64,
+        /// Gripper command.
+        grip: f32,
+        /// Step limit.
+        max: usize,
+        /// Hold the orientation during later moves.
+        hold: bool,
+    },
     /// Gripper command for a number of steps, arm still.
     Grip {
         /// +1 close, −1 open.
@@ -228,6 +245,8 @@ pub struct Expert {
     op_start: Option<[f64; 3]>,
     planned: bool,
     init_rot: Option<Matrix3<f64>>,
+    /// Orientation held during moves (set by [`Op::Orient`]).
+    att: Option<Matrix3<f64>>,
     pending: Option<Atom>,
     nonlive: usize,
     last_satisfied: usize,
@@ -262,6 +281,7 @@ impl Expert {
             op_start: None,
             planned: false,
             init_rot: None,
+            att: None,
             pending: None,
             nonlive: 0,
             last_satisfied: 0,
@@ -400,6 +420,42 @@ impl Expert {
                     a[k] = ((g * e[k]).clamp(-1.0, 1.0) + n) as f32;
                 }
                 a[6] = grip;
+                if let Some(goal) = self.att {
+                    let err = orientation_error(&goal, &quat_mat(obs.eef_quat));
+                    for k in 0..3 {
+                        a[3 + k] = (err[k] * 2.5).clamp(-1.0, 1.0) as f32;
+                    }
+                }
+                Some(a)
+            }
+            Op::Orient {
+                yaw,
+                axis,
+                tilt,
+                grip,
+                max,
+                hold,
+            } => {
+                let r0 = self.init_rot.unwrap_or_else(Matrix3::identity);
+                let rz = nalgebra::Rotation3::from_axis_angle(&nalgebra::Vector3::z_axis(), yaw);
+                let ax = nalgebra::Unit::new_normalize(nalgebra::Vector3::new(
+                    axis[0], axis[1], axis[2],
+                ));
+                let rt = nalgebra::Rotation3::from_axis_angle(&ax, tilt);
+                let goal = rt.into_inner() * rz.into_inner() * r0;
+                let err = orientation_error(&goal, &quat_mat(obs.eef_quat));
+                if err.norm() < 0.03 || self.op_steps >= max {
+                    self.att = hold.then_some(goal);
+                    return None;
+                }
+                let mut a = still(grip);
+                for k in 0..3 {
+                    a[3 + k] = (err[k] * 2.5).clamp(-1.0, 1.0) as f32;
+                }
+                let e = sub(start, eef);
+                for k in 0..3 {
+                    a[k] = (e[k] * 15.0).clamp(-1.0, 1.0) as f32;
+                }
                 Some(a)
             }
             Op::Yaw { yaw, grip, max } => {
@@ -410,6 +466,7 @@ impl Expert {
                 let cur = quat_mat(obs.eef_quat);
                 let err = orientation_error(&goal, &cur);
                 if err.norm() < 0.02 || self.op_steps >= max {
+                    self.att = None;
                     return None;
                 }
                 let mut a = still(grip);

@@ -56,6 +56,10 @@ pub(super) struct Builder<'a> {
     yaw: f64,
     held_grasp_xy: Option<[f64; 2]>,
     expected: Vec<(usize, [f64; 3])>,
+    /// Take bowls by the near (−x) rim with the hand along x.
+    near_rim: bool,
+    /// The destination is inside an open drawer (carry above its front, drop low).
+    into_drawer: bool,
 }
 
 impl<'a> Builder<'a> {
@@ -75,6 +79,8 @@ impl<'a> Builder<'a> {
             yaw: 0.0,
             held_grasp_xy: None,
             expected: Vec::new(),
+            near_rim: false,
+            into_drawer: false,
         }
     }
 
@@ -245,18 +251,24 @@ impl<'a> Builder<'a> {
                 };
                 let Some(site) = r.site else { return };
                 if !r.joints.is_empty() {
-                    // A drawer: open it first.
-                    self.open_drawer(&atom.args[1]);
+                    // A drawer: open it first; the open drawer overhangs the table in front of the
+                    // cabinet, so the object is taken from the robot's side and dropped a little
+                    // outwards of the region's centre (clear of the carcass).
+                    let out = self.open_drawer(&atom.args[1]);
+                    self.near_rim = true;
+                    self.into_drawer = true;
                     self.pick_place(
                         obj,
                         Point::Site {
                             site,
-                            off: [0.0, 0.0, 0.0],
+                            off: [out[0] * 0.015, out[1] * 0.015, 0.0],
                         },
                         n,
                         next_obj,
                         true,
                     );
+                    self.near_rim = false;
+                    self.into_drawer = false;
                 } else {
                     self.pick_place(
                         obj,
@@ -271,7 +283,7 @@ impl<'a> Builder<'a> {
                 }
             }
             "open" => {
-                self.open_drawer(&atom.args[0]);
+                let _ = self.open_drawer(&atom.args[0]);
                 self.ops.push(Op::WaitSatisfied {
                     n,
                     max: 30,
@@ -301,8 +313,10 @@ impl<'a> Builder<'a> {
     fn grasp_offset(&mut self, obj: usize) -> GraspAt {
         let cat = self.cat(obj);
         let (off, local, above) = match cat {
-            "akita_black_bowl" if horizontal_reach(self.expected_pos(obj)) > 0.72 => {
-                // Far out: yaw the hand by 90° and pinch the near (−x) rim.
+            "akita_black_bowl"
+                if self.near_rim || horizontal_reach(self.expected_pos(obj)) > 0.72 =>
+            {
+                // Far out (or under an open drawer): yaw the hand by 90° and pinch the near (−x) rim.
                 (
                     [-0.0485, self.jit(0.003), 0.041 + self.jit(0.003)],
                     false,
@@ -372,8 +386,8 @@ impl<'a> Builder<'a> {
                 },
             ),
         };
-        let far =
-            self.cat(obj) == "akita_black_bowl" && horizontal_reach(self.expected_pos(obj)) > 0.72;
+        let far = self.cat(obj) == "akita_black_bowl"
+            && (self.near_rim || horizontal_reach(self.expected_pos(obj)) > 0.72);
         let want_yaw = if far
             || (self.cat(obj) == "wine_bottle" && self.hand_blocked_along_y(self.expected_pos(obj)))
         {
@@ -393,9 +407,23 @@ impl<'a> Builder<'a> {
                 max: 25,
             });
         }
-        self.mv(Target::Grip(pre), 0.02, 90, 12.0);
-        self.pause(OPEN);
-        self.mv(Target::Grip(at), 0.005, 40, 10.0);
+        if self.near_rim && self.cat(obj) == "akita_black_bowl" {
+            // Under an open drawer: the hand (along x) reaches 10 cm past the rim, so it comes down
+            // 7.5 cm further out, below the drawer's bottom, and slides in.
+            let body = |x: f64, z: f64| Point::Body {
+                inst: obj,
+                off: [x, 0.0, z],
+                local: false,
+            };
+            self.mv(Target::Grip(body(-0.125, 0.28)), 0.03, 40, 12.0);
+            self.mv(Target::Grip(body(-0.125, 0.066)), 0.01, 40, 14.0);
+            self.mv(Target::Grip(body(-0.0485, 0.062)), 0.008, 30, 14.0);
+            self.mv(Target::Grip(at), 0.005, 30, 16.0);
+        } else {
+            self.mv(Target::Grip(pre), 0.02, 90, 12.0);
+            self.pause(OPEN);
+            self.mv(Target::Grip(at), 0.005, 40, 10.0);
+        }
         let extra = if self.vary {
             self.rng.random_range(0..3)
         } else {
@@ -486,12 +514,22 @@ impl<'a> Builder<'a> {
         if far && !into_basket {
             cz -= 0.035;
         }
+        if self.into_drawer
+            && let Point::Site { site, .. } = &to
+        {
+            // Over the drawer's front panel (its top is ~3 cm above the region's centre).
+            cz = cz.max(self.env.data().site_pos(*site)[2] + 0.06);
+        }
         // Raised destinations (cabinet top, stove): clear them by a few centimetres.
         if let Point::Site { site, .. } = &to {
             let sz = self.env.data().site_pos(*site)[2];
             if !into_basket && !drop {
                 cz = cz.max(sz + 0.05);
             }
+        }
+        if self.near_rim && self.cat(obj) == "akita_black_bowl" {
+            // Out from under the open drawer before lifting.
+            self.mv(Target::Rel([-0.06, 0.0, 0.004]), 0.01, 20, 12.0);
         }
         // Lift straight up first.
         let o = self.pos(obj);
@@ -506,6 +544,10 @@ impl<'a> Builder<'a> {
             40,
             12.0,
         );
+        if self.into_drawer {
+            // All the way up before moving over the drawer's front panel.
+            self.mv(Target::RelZ(cz + 0.045), 0.008, 30, 12.0);
+        }
         // Over the destination at carry height.
         let (jx, jy) = (self.jit(0.004), self.jit(0.004));
         let hover = match &to {
@@ -547,7 +589,7 @@ impl<'a> Builder<'a> {
             let z = if into_basket {
                 TABLE_TOP + 0.165 - s[2]
             } else {
-                0.03
+                0.045
             };
             (true, z)
         } else {
@@ -575,6 +617,7 @@ impl<'a> Builder<'a> {
             Point::Rim { .. } => to.clone(),
         };
         if drop {
+            let g = if self.into_drawer { 14.0 } else { 10.0 };
             self.mv(
                 Target::Carry {
                     held: obj,
@@ -582,7 +625,7 @@ impl<'a> Builder<'a> {
                 },
                 0.006,
                 45,
-                10.0,
+                g,
             );
             self.release();
             self.ops.push(Op::WaitSatisfied {
@@ -758,14 +801,18 @@ impl<'a> Builder<'a> {
         self.release();
     }
 
-    /// Open the drawer owning region `region`: yaw the hand so the fingers straddle the handle bar, pull.
-    fn open_drawer(&mut self, region: &str) {
+    /// Open the drawer owning region `region`: the hand, yawed so the fingers close along the handle bar
+    /// and tilted ~40° so it stays out in front of the drawers above, slides in around the bar's ends,
+    /// pinches them and pulls the drawer out along its slide.
+    fn open_drawer(&mut self, region: &str) -> [f64; 3] {
         let Some(r) = self.scene.regions.get(region) else {
-            return;
+            return [0.0; 3];
         };
-        let Some(cab) = r.parent else { return };
+        let Some(cab) = r.parent else {
+            return [0.0; 3];
+        };
         let Some(&(_, qadr, _)) = r.joints.first() else {
-            return;
+            return [0.0; 3];
         };
         let level = region.trim_start_matches(&format!("{}_", self.scene.instances[cab].name));
         let n0 = match level {
@@ -775,7 +822,7 @@ impl<'a> Builder<'a> {
         };
         let name = format!("{}_g{}", self.scene.instances[cab].name, n0 + 5);
         let Some(geom) = self.scene.model.id(ObjType::Geom, &name) else {
-            return;
+            return [0.0; 3];
         };
         let hp = self.env.data().geom_pos(geom);
         let q = self
@@ -784,32 +831,47 @@ impl<'a> Builder<'a> {
             .body_quat(self.scene.instances[cab].root_body);
         let out = qrot(q, [0.0, -1.0, 0.0]);
         let q0 = self.env.data().qpos()[qadr];
-        // Fingers along the bar (cabinet x): rotate the hand by 90° about z.
+        let yaw = out[1].atan2(out[0]);
+        let axis = [out[1], -out[0], 0.0];
+        let phi = 0.7 + self.jit(0.05);
+        // Where the fingers point once tilted: into the cabinet and down.
+        let app = [-out[0] * phi.sin(), -out[1] * phi.sin(), -phi.cos()];
+        let at = [
+            hp[0] + self.jit(0.002),
+            hp[1] + self.jit(0.002),
+            hp[2] + self.jit(0.002),
+        ];
+        let back = |d: f64| [at[0] - app[0] * d, at[1] - app[1] * d, at[2] - app[2] * d];
         self.ops.push(Op::Grip {
             cmd: OPEN,
             steps: 0,
         });
-        self.yaw = std::f64::consts::FRAC_PI_2;
-        let pre = [hp[0] + out[0] * 0.012, hp[1] + out[1] * 0.012, hp[2] + 0.08];
-        self.mv(Target::Grip(Point::Abs(pre)), 0.02, 80, 12.0);
-        self.ops.push(Op::Yaw {
-            yaw: self.yaw,
-            grip: OPEN,
-            max: 30,
-        });
-        let at = [pre[0], pre[1], hp[2] - 0.002];
-        self.mv(Target::Grip(Point::Abs(at)), 0.005, 40, 10.0);
+        // Turn while moving to a point out in front of the handle; finish the turn there.
+        self.yaw = yaw;
+        for max in [0, 20] {
+            self.ops.push(Op::Orient {
+                yaw,
+                axis,
+                tilt: -phi,
+                grip: OPEN,
+                max,
+                hold: true,
+            });
+            if max == 0 {
+                self.mv(Target::Grip(Point::Abs(back(0.12))), 0.02, 80, 12.0);
+            }
+        }
+        self.mv(Target::Grip(Point::Abs(at)), 0.004, 50, 14.0);
         self.ops.push(Op::Grip {
             cmd: CLOSE,
             steps: 10,
         });
-        self.held = None;
-        let pull = 0.158 + q0;
+        let pull = 0.165 + q0;
         let dst = add(at, [out[0] * pull, out[1] * pull, 0.0]);
         self.ops.push(Op::Move {
             target: Target::Grip(Point::Abs(dst)),
             grip: CLOSE,
-            tol: 0.006,
+            tol: 0.008,
             max: 60,
             gain: 10.0,
             until_pending: false,
@@ -818,13 +880,23 @@ impl<'a> Builder<'a> {
             cmd: OPEN,
             steps: 8,
         });
-        self.mv(Target::Rel([0.0, 0.0, 0.08]), 0.015, 30, 12.0);
-        self.yaw = 0.0;
-        self.ops.push(Op::Yaw {
-            yaw: 0.0,
+        self.held = None;
+        self.mv(
+            Target::Rel([-app[0] * 0.06, -app[1] * 0.06, -app[2] * 0.06 + 0.03]),
+            0.015,
+            30,
+            12.0,
+        );
+        // Level the hand (same yaw) during the next move.
+        self.ops.push(Op::Orient {
+            yaw,
+            axis,
+            tilt: 0.0,
             grip: OPEN,
-            max: 30,
+            max: 0,
+            hold: true,
         });
+        out
     }
 
     /// Turn a stove knob on: pinch its pointer bar across its thickness with the hand yawed along the
