@@ -175,6 +175,14 @@ pub enum Op {
         /// Gripper command.
         grip: f32,
     },
+    /// Skip the next `count` ops when the goal tracker reports at least `n` satisfied subgoals (a
+    /// corrective retry that is only needed when a placement was not registered).
+    SkipIfSatisfied {
+        /// Subgoal count.
+        n: usize,
+        /// Ops to skip.
+        count: usize,
+    },
     /// Stay still until the pending atom has been false for `n` steps since the last append.
     WaitNonlive {
         /// Steps.
@@ -192,22 +200,6 @@ pub enum Op {
         max: usize,
         /// Gripper command.
         grip: f32,
-    },
-    /// Closed-loop push of an instance so that its origin reaches `to` (xy) within `tol`: the pusher
-    /// stays behind the object along the push direction at height `z` above the object origin.
-    Push {
-        /// Pushed instance.
-        inst: usize,
-        /// Goal point (xy used).
-        to: Point,
-        /// Object radius (m) the pusher keeps behind.
-        radius: f64,
-        /// Height of the grip site above the object's origin.
-        z: f64,
-        /// Tolerance (m).
-        tol: f64,
-        /// Step limit.
-        max: usize,
     },
     /// Marks the atom the plan now works towards (for [`Op::WaitNonlive`]).
     Pending(Option<Atom>),
@@ -486,6 +478,13 @@ impl Expert {
                 let sat = obs.goal.as_ref().map(|g| g.satisfied).unwrap_or(0);
                 (sat < n && self.op_steps < max).then_some(still(grip))
             }
+            Op::SkipIfSatisfied { n, count } => {
+                let sat = obs.goal.as_ref().map(|g| g.satisfied).unwrap_or(0);
+                if sat >= n {
+                    self.cur += count;
+                }
+                None
+            }
             Op::WaitNonlive { n, max, grip } => {
                 (self.nonlive < n && self.op_steps < max).then_some(still(grip))
             }
@@ -495,55 +494,6 @@ impl Expert {
                     .and_then(|p| p.eval(&atom.predicate, &atom.args).ok())
                     .unwrap_or(false);
                 (!holds && self.op_steps < max).then_some(still(grip))
-            }
-            Op::Push {
-                inst,
-                to,
-                radius,
-                z,
-                tol,
-                max,
-            } => {
-                let o = env.data().body_pos(scene.instances[inst].root_body);
-                let goal = point(scene, env, &to);
-                let d = [goal[0] - o[0], goal[1] - o[1]];
-                let dist = (d[0] * d[0] + d[1] * d[1]).sqrt();
-                if dist < tol || self.op_steps >= max {
-                    return None;
-                }
-                let u = [d[0] / dist, d[1] / dist];
-                // Where the pusher should be: behind the object, pushing through it.
-                let adv = dist.min(0.04);
-                let behind = [
-                    o[0] - u[0] * (radius - adv),
-                    o[1] - u[1] * (radius - adv),
-                    o[2] + z,
-                ];
-                // If the pusher is not behind the object, go around above it.
-                let rel = [eef[0] - o[0], eef[1] - o[1]];
-                let along = rel[0] * u[0] + rel[1] * u[1];
-                let lateral = (rel[0] * u[1] - rel[1] * u[0]).abs();
-                let t = if along > -radius + 0.01 || lateral > 0.03 {
-                    let pre = [
-                        o[0] - u[0] * (radius + 0.03),
-                        o[1] - u[1] * (radius + 0.03),
-                        o[2] + z,
-                    ];
-                    let dxy = ((eef[0] - pre[0]).powi(2) + (eef[1] - pre[1]).powi(2)).sqrt();
-                    if dxy > 0.015 {
-                        [pre[0], pre[1], o[2] + z + 0.08]
-                    } else {
-                        pre
-                    }
-                } else {
-                    behind
-                };
-                let e = sub(t, eef);
-                let mut a = still(1.0);
-                for k in 0..3 {
-                    a[k] = (e[k] * 12.0 * self.speed).clamp(-0.6, 0.6) as f32;
-                }
-                Some(a)
             }
         }
     }

@@ -58,6 +58,8 @@ pub(super) struct Builder<'a> {
     expected: Vec<(usize, [f64; 3])>,
     /// Take bowls by the near (−x) rim with the hand along x.
     near_rim: bool,
+    /// Where the object about to be grasped is going (for the choice of its rim side).
+    next_dest: Option<[f64; 3]>,
     /// The destination is inside an open drawer (carry above its front, drop low).
     into_drawer: bool,
 }
@@ -81,6 +83,7 @@ impl<'a> Builder<'a> {
             expected: Vec::new(),
             near_rim: false,
             into_drawer: false,
+            next_dest: None,
         }
     }
 
@@ -324,8 +327,12 @@ impl<'a> Builder<'a> {
                 )
             }
             "akita_black_bowl" => {
-                // Pinch the rim wall at ±y (fingers open along world y).
-                let coin = self.vary && self.rng.random_bool(0.5);
+                // Pinch the rim wall at ±y (fingers open along world y). Where both sides are free here,
+                // take the one that is free at the destination (the hand keeps that side there).
+                let mut coin = self.vary && self.rng.random_bool(0.5);
+                if let Some(d) = self.next_dest {
+                    coin = clear_side(self.scene, self.env, obj, d, 0.0485, coin) > 0.0;
+                }
                 let off = [self.jit(0.004), 0.0485, 0.041 + self.jit(0.003)];
                 return GraspAt::Rim {
                     off,
@@ -475,6 +482,9 @@ impl<'a> Builder<'a> {
         self.held = None;
         let up = 0.07 + self.jit(0.015);
         self.mv(Target::Rel([0.0, 0.0, up]), 0.015, 30, 12.0);
+        // Far out the arm is nearly straight (a singularity OSC cannot leave): come back in towards
+        // the shoulder before the next move (no motion when already within reach).
+        self.mv(Target::PullIn { h: 0.66, dz: 0.0 }, 0.015, 25, 12.0);
     }
 
     /// Height of the held object's origin while carrying.
@@ -494,11 +504,18 @@ impl<'a> Builder<'a> {
             if self.held.is_some() {
                 self.release();
             }
+            self.next_dest = Some(match &to {
+                Point::Body { inst, .. } | Point::Rim { inst, .. } => self.pos(*inst),
+                Point::Site { site, .. } => self.env.data().site_pos(*site),
+                Point::Abs(p) => *p,
+            });
             self.grasp(obj);
+            self.next_dest = None;
         }
         let into_basket =
             drop && matches!(&to, Point::Site { .. }) && self.cat(obj) == "cream_cheese";
         let to = self.within_reach(to);
+        let before = self.expected_pos(obj);
         if let Point::Body { inst, .. } = &to {
             let p = self.pos(*inst);
             self.expected.push((obj, p));
@@ -535,15 +552,25 @@ impl<'a> Builder<'a> {
         let o = self.pos(obj);
         let lift = cz - o[2];
         let lz = lift.max(0.05) + self.jit(0.01);
-        // Far out, first pull in towards the shoulder at low height (a straight arm is a singularity
-        // OSC cannot leave; high poses reach less far), then lift.
-        self.mv(Target::PullIn { h: 0.63, dz: 0.03 }, 0.015, 30, 12.0);
-        self.mv(
-            Target::Rel([0.0, 0.0, (lz - 0.03).max(0.02)]),
-            0.02,
-            40,
-            12.0,
-        );
+        // Put back where it was taken from, far out: lift just clear and stay out there (pulling in and
+        // lifting high would leave the object out of reach for the way back).
+        let back_in_place = matches!(&to, Point::Body { .. })
+            && ((before[0] - dest_p[0]).powi(2) + (before[1] - dest_p[1]).powi(2)).sqrt() < 0.02
+            && horizontal_reach(dest_p) > 0.68;
+        if back_in_place {
+            cz = before[2] + 0.045 + self.jit(0.005);
+            self.mv(Target::Rel([0.0, 0.0, cz - before[2]]), 0.01, 30, 12.0);
+        } else {
+            // Far out, first pull in towards the shoulder at low height (a straight arm is a singularity
+            // OSC cannot leave; high poses reach less far), then lift.
+            self.mv(Target::PullIn { h: 0.63, dz: 0.03 }, 0.015, 30, 12.0);
+            self.mv(
+                Target::Rel([0.0, 0.0, (lz - 0.03).max(0.02)]),
+                0.02,
+                40,
+                12.0,
+            );
+        }
         if self.into_drawer {
             // All the way up before moving over the drawer's front panel.
             self.mv(Target::RelZ(cz + 0.045), 0.008, 30, 12.0);
@@ -638,13 +665,50 @@ impl<'a> Builder<'a> {
         self.place_mv(
             Target::Carry {
                 held: obj,
-                to: place,
+                to: place.clone(),
             },
             45,
         );
         self.ops.push(Op::WaitSatisfied {
             n,
-            max: 40,
+            max: 25,
+            grip: CLOSE,
+        });
+        // Not appended (set down off-centre, or not touching): lift a little, re-centre and set it down
+        // again. Skipped when the tracker has appended.
+        self.ops.push(Op::SkipIfSatisfied { n, count: 4 });
+        self.mv(Target::Rel([0.0, 0.0, 0.025]), 0.006, 15, 12.0);
+        let above = match &place {
+            Point::Body { inst, off, local } => Point::Body {
+                inst: *inst,
+                off: [off[0], off[1], off[2] + 0.02],
+                local: *local,
+            },
+            Point::Site { site, off } => Point::Site {
+                site: *site,
+                off: [off[0], off[1], off[2] + 0.02],
+            },
+            other => other.clone(),
+        };
+        self.mv(
+            Target::Carry {
+                held: obj,
+                to: above,
+            },
+            0.004,
+            30,
+            10.0,
+        );
+        self.place_mv(
+            Target::Carry {
+                held: obj,
+                to: place,
+            },
+            30,
+        );
+        self.ops.push(Op::WaitSatisfied {
+            n,
+            max: 30,
             grip: CLOSE,
         });
         self.pause(CLOSE);
