@@ -429,7 +429,7 @@ impl<'a> Builder<'a> {
         } else {
             self.mv(Target::Grip(pre), 0.02, 90, 12.0);
             self.pause(OPEN);
-            self.mv(Target::Grip(at), 0.005, 40, 10.0);
+            self.mv(Target::Grip(at), 0.005, 40, 13.0);
         }
         let extra = if self.vary {
             self.rng.random_range(0..3)
@@ -438,7 +438,7 @@ impl<'a> Builder<'a> {
         };
         self.ops.push(Op::Grip {
             cmd: CLOSE,
-            steps: 10 + extra,
+            steps: 9 + extra,
         });
         self.held = Some(obj);
         let p = self.pos(obj);
@@ -477,7 +477,7 @@ impl<'a> Builder<'a> {
         };
         self.ops.push(Op::Grip {
             cmd: OPEN,
-            steps: 8 + extra,
+            steps: 7 + extra,
         });
         self.held = None;
         let up = 0.07 + self.jit(0.015);
@@ -576,7 +576,15 @@ impl<'a> Builder<'a> {
             self.mv(Target::RelZ(cz + 0.045), 0.008, 30, 12.0);
         }
         // Over the destination at carry height.
-        let (jx, jy) = (self.jit(0.004), self.jit(0.004));
+        let (mut jx, mut jy) = (self.jit(0.004), self.jit(0.004));
+        // Far out, set objects down on the near side of an object destination (On allows 3 cm): the
+        // arm stays less stretched and can come back.
+        let reach = horizontal_reach(dest_p);
+        if matches!(&to, Point::Body { .. }) && reach > 0.7 {
+            let k = (reach - 0.7).min(0.015) / reach;
+            jx += (SHOULDER[0] - dest_p[0]) * k;
+            jy += (SHOULDER[1] - dest_p[1]) * k;
+        }
         let hover = match &to {
             Point::Body { inst, off, local } => Point::Body {
                 inst: *inst,
