@@ -308,10 +308,13 @@ mod tests {
         assert_eq!(r.frames, 20);
         assert_eq!(r.index_fraction, 1.0);
         assert_eq!(r.cross_episode, 0.0);
-        assert_eq!(r.per_label, vec![
-            (0, "subgoal 0".to_string(), 10, 1.0),
-            (1, "subgoal 1".to_string(), 10, 1.0)
-        ]);
+        assert_eq!(
+            r.per_label,
+            vec![
+                (0, "subgoal 0".to_string(), 10, 1.0),
+                (1, "subgoal 1".to_string(), 10, 1.0)
+            ]
+        );
 
         let mut twins = leg(0, 0.0);
         twins.extend(leg(1, 0.1));
@@ -332,7 +335,9 @@ mod tests {
             for t in 0..20 {
                 let label = t / 10;
                 // Episode offsets 0, 0.011, 0.024, 0.039: nearest episodes 0↔1, 2→1, 3→2.
-                let x = label as f32 * 100.0 + (t % 10) as f32 * 0.1 + (10 + e) as f32 * e as f32 * 0.001;
+                let x = label as f32 * 100.0
+                    + (t % 10) as f32 * 0.1
+                    + (10 + e) as f32 * e as f32 * 0.001;
                 frames.push(frame(e, t, x, label));
             }
         }

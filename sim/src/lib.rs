@@ -14,6 +14,7 @@ pub mod robot;
 pub mod task;
 
 pub use env::{Env, EnvConfig, EnvError, GoalStatus, Observation};
+pub mod aliasing;
 pub mod assets;
 pub mod bench;
 pub mod generate;
@@ -21,4 +22,3 @@ pub mod predicates;
 pub mod record;
 pub mod scene;
 pub mod sheet;
-pub mod aliasing;

@@ -602,7 +602,7 @@ fn expert_eval(
         let mut s = String::new();
         s.push_str("# Scripted expert: success and episode lengths\n\n");
         s.push_str(&format!(
-            "Regenerate with `cargo run --release -p sim -- expert-eval --task {task} --episodes {episodes} --seed {seed}{} --markdown {}`.\n\n",
+            "Regenerate with `cargo run --release -p sim -- expert-eval --task {task} --episodes {episodes} --seed {seed}{} --markdown {}` (add `--workers 2` to run two tasks at a time; the table does not depend on it).\n\n",
             repeat.map(|n| format!(" --repeat {n}")).unwrap_or_default(),
             md.display()
         ));
@@ -673,7 +673,9 @@ fn aliasing(
             100.0 * r.cross_episode
         );
     }
-    println!("\nPer next subgoal (image+state):\n\n| # | next subgoal | frames | aliased |\n|---|---|---|---|");
+    println!(
+        "\nPer next subgoal (image+state):\n\n| # | next subgoal | frames | aliased |\n|---|---|---|---|"
+    );
     for (l, text, n, f) in &both.per_label {
         println!("| {l} | {text} | {n} | {:.1}% |", 100.0 * f);
     }

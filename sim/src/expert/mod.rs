@@ -683,35 +683,46 @@ while let Some(action) = expert.act(&env, &obs) {             // None: demonstra
   metre, to a live target: a point on an object, or *carry* — the held object's origin to a destination),
   yaw, gripper open/close (10–12 steps, fully closed before lifting), hold, wait for the tracker.
 * **Grasps.** Bowl: pinch the rim wall on the ±y side whose neighbourhood is freer (the 20 cm hand box is
-  checked against tall objects and fixtures, decided on the live state); bowls beyond ~0.72 m from the
-  shoulder are pinched at the near (−x) rim with the hand yawed 90°. Bottle: the neck. Cream cheese: across
-  its 4.3 cm width. Basket: the wall facing ±y, then slid 1.5 cm above the table. Plate: pushed with the
-  closed fingers (closed-loop, pusher kept behind the plate along the push direction).
-* **Reach.** A straight arm is a singularity the OSC cannot leave; far out the expert first pulls in
-  towards the shoulder before lifting and carries lower.
+  checked against tall objects and fixtures, decided on the live state; on a tie, the side that is free
+  at the destination); bowls beyond ~0.72 m from the shoulder, or under an open drawer, are pinched at
+  the near (−x) rim with the hand yawed 90°. Bottle: the neck (hand yawed 90° when the rack is beside
+  it). Cream cheese: across its 4.3 cm width. Basket: the wall facing ±y, then slid 1.5 cm above the
+  table. Plate: its +y rim pinched, lifted 8 cm (over the cream cheese) and set down in the region
+  where its footprint clears the objects already there.
+* **Articulated fixtures.** Drawers: the hand is yawed so the fingers close along the handle bar and
+  tilted ~40° about the horizontal so it stays in front of the drawer above; it slides in around the
+  bar's ends, pinches them and pulls 16 cm along the slide (moves hold that orientation). Stove: the
+  fingers pinch the knob's pointer bar across its thickness and the wrist twists 0.75 rad.
+* **Reach.** A straight arm is a singularity the OSC cannot leave: far out the expert first pulls in
+  towards the shoulder before lifting and carries lower, pulls in again after releasing far out, aims
+  far object destinations 1.5 cm towards the shoulder (On allows 3 cm), puts an object back where it
+  was taken from with a short 4.5 cm lift instead, and sets things on the cabinet top on its near half.
 * **Tracker timing.** The expert follows the tracker's debounce: it keeps a lifted object away until the
   pending atom has been false ≥ 17 steps since the last append, holds the placed state until the tracker
   appends it, and moves the same object on without releasing when the next subgoal is about it (the
-  repetition family never lets go of the bowl/bottle). After the last subgoal it releases, retreats 6 cm
-  and holds 5 steps; nothing is disturbed after completion.
+  repetition family never lets go of the bowl/bottle). A placement the tracker did not register within
+  25 steps is retried once (lift 2.5 cm, re-centre, set down). After the last subgoal it releases,
+  retreats 6 cm and holds 5 steps; nothing is disturbed after completion.
 * **Variation** (ChaCha8 from the episode seed): approach/placement offsets (±2–6 mm), grasp height, a
   per-episode speed factor (0.85–1.15), 0–3-step pauses, Gaussian noise σ = 0.03 on translation actions
-  while moving, rim side on ties, branch choice (T7).
+  while moving, rim side on ties, branch choice (T7), drawer tilt (±0.05 rad), knob twist (±0.05 rad).
+
+## Asset changes made for the expert
+
+* `wooden_cabinet`: the drawer handles are 5 cm bars standing 2.5 cm proud of the drawer fronts on two
+  posts (they stood 9 mm proud, too little for a fingertip; LIBERO's handles protrude similarly).
+* `flat_stove`: the knob joint is a light part (0.1 kg, inertia 2·10⁻⁴ kg·m², damping 0.02, armature
+  5·10⁻⁴) instead of LIBERO's placeholder inertial (3 kg, 1 kg·m², damping 1), which no fingertip could
+  turn by 0.5 rad within the budget. The `turn_on` threshold (q ≥ 0.5) is unchanged.
 
 ## Known limitations
 
-* `open_the_middle_drawer_of_the_cabinet`, `open_the_top_drawer_and_put_the_bowl_inside`: the hand is
-  yawed 90° to pinch the handle bar's ends (70 mm between 79 mm fingers) but the pull does not open the
-  drawer reliably yet (the handle stands only 9 mm proud of the drawer front; the 6 cm hand box meets the
-  carcass above the middle drawer).
-* `turn_on_the_stove`: the closed fingers push the knob's pointer bar, but the stove sits ~0.3 m from the
-  base where the elbow is near its limit; the knob (3 kg, inertia 1 kg·m², damping 1) does not reach 0.5 rad.
-* `push_the_plate_to_the_front_of_the_stove`: the closed-loop push does not bring the plate into the
-  8 × 8 cm region reliably.
-* `put_the_wine_bottle_on_the_rack`: no plan for laying the bottle into the tilted cradle yet (the generic
-  place puts it upright at the region, which `On` rejects).
-* `put_the_wine_bottle_on_top_of_the_cabinet`: the cabinet top (z ≈ 1.13) at ~0.73 m from the shoulder is
-  at the edge of the reach with a bottle held by the neck.
+* `put_the_wine_bottle_on_the_rack`: no working plan. The rack's `top_region` is a slab tilted 62.5°
+  (LIBERO's site); an upright bottle set at the site satisfies `On` while held (the tracker appends it)
+  but falls once released, and laying the bottle into the tilted cradle needs the hand pitched ~90° with
+  the bottle inside the rack's frame, which the current primitives do not do.
+* `open_the_top_drawer_and_put_the_bowl_inside` runs close to its 300-step budget (open, take the bowl
+  from under the open drawer, drop it in).
 * Long multi-object tasks (T7, T8) use most of their step budget (transport speed is bounded by OSC_POSE's
-  ~1.5 cm per step).
+  ~1.5 cm per step); the remaining failures there are arm poses near full stretch the OSC cannot leave.
 "#;
