@@ -561,6 +561,8 @@ fn qrot(q: [f64; 4], v: [f64; 3]) -> [f64; 3] {
 }
 
 /// Flat stove: 0.297 × 0.19 × 0.07 m; knob (hinge `button`, axis z) at the origin, burner at +0.15 x.
+/// The knob is a light part (100 g, damping 0.02) rather than LIBERO's placeholder inertial (3 kg,
+/// 1 kg·m², damping 1), which no fingertip force could turn by the 0.5 rad `turn_on` needs.
 fn flat_stove(out: &mut String, p: &str) {
     {
         let mut g = geoms(out, p, [0.2, 0.2, 0.22, 1.0]);
@@ -590,8 +592,8 @@ fn flat_stove(out: &mut String, p: &str) {
     let _ = writeln!(
         out,
         r#"<body name="{p}_knob" pos="0 0 0.038">
-<inertial pos="0 0 0.01" mass="3" diaginertia="1 1 1"/>
-<joint name="{p}_button" type="hinge" axis="0 0 1" range="-0.005 2.1" limited="true" damping="1"/>"#
+<inertial pos="0 0 0.01" mass="0.1" diaginertia="0.0002 0.0002 0.0002"/>
+<joint name="{p}_button" type="hinge" axis="0 0 1" range="-0.005 2.1" limited="true" damping="0.02" armature="0.0005"/>"#
     );
     {
         let mut g = geoms(out, p, [0.85, 0.85, 0.87, 1.0]);
@@ -600,7 +602,7 @@ fn flat_stove(out: &mut String, p: &str) {
         g.friction = "1 0.005 0.0001";
         g.contact = r#"solref="0.02 1""#;
         g.cyl([0.0, 0.0, 0.008], 0.022, 0.008, 0.0);
-        // Pointer bar: what the gripper pushes to turn the knob.
+        // Pointer bar: what the gripper pinches to turn the knob.
         g.bx([0.0, 0.0, 0.024], [0.004, 0.02, 0.008], 0.0);
     }
     out.push_str("</body>\n");
@@ -682,9 +684,11 @@ fn wooden_cabinet(out: &mut String, p: &str) {
             let mut h = geoms(g.out, p, [0.75, 0.72, 0.65, 1.0]);
             part_bits(&mut h);
             h.n = n0 + 5;
-            h.bx([0.0, dy0 - 0.026, zc], [0.035, 0.005, 0.006], 0.0);
-            h.bx([0.03, dy0 - 0.018, zc], [0.004, 0.007, 0.005], 0.0);
-            h.bx([-0.03, dy0 - 0.018, zc], [0.004, 0.007, 0.005], 0.0);
+            // A 5 cm bar standing 2.5 cm proud of the front on two posts: room for a fingertip behind it
+            // and for the fingers around its ends.
+            h.bx([0.0, dy0 - 0.042, zc], [0.025, 0.005, 0.006], 0.0);
+            h.bx([0.017, dy0 - 0.0245, zc], [0.004, 0.0125, 0.005], 0.0);
+            h.bx([-0.017, dy0 - 0.0245, zc], [0.004, 0.0125, 0.005], 0.0);
         }
         site(
             out,

@@ -14,6 +14,7 @@ pub mod robot;
 pub mod task;
 
 pub use env::{Env, EnvConfig, EnvError, GoalStatus, Observation};
+pub mod aliasing;
 pub mod assets;
 pub mod bench;
 pub mod generate;

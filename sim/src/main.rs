@@ -144,6 +144,31 @@ enum Command {
         /// Print every episode.
         #[arg(long)]
         verbose: bool,
+        /// Worker threads (tasks are shared out; results do not depend on it).
+        #[arg(long, default_value_t = 1)]
+        workers: usize,
+    },
+    /// Perceptual aliasing of expert episodes: the share of frames whose nearest neighbour (image and
+    /// state features, excluding the same episode within ±k steps) needs a different next subgoal.
+    Aliasing {
+        /// Task id (`t3`, `libero_goal/<name>`).
+        #[arg(long)]
+        task: String,
+        /// Expert episodes (seeds seed, seed+1, …).
+        #[arg(long, default_value_t = 10)]
+        episodes: usize,
+        /// First seed.
+        #[arg(long, default_value_t = 0)]
+        seed: u64,
+        /// Same-episode frames within ±k steps are not neighbours.
+        #[arg(long, default_value_t = 10)]
+        k: usize,
+        /// Side of the grey image feature.
+        #[arg(long, default_value_t = 16)]
+        side: usize,
+        /// Rendered agentview size the image feature is averaged from.
+        #[arg(long, default_value_t = 64)]
+        render_size: usize,
     },
     /// Measure physics, rendering and Env throughput.
     Bench {
@@ -294,7 +319,16 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             repeat,
             markdown,
             verbose,
-        } => expert_eval(&task, episodes, seed, repeat, markdown, verbose),
+            workers,
+        } => expert_eval(&task, episodes, seed, repeat, markdown, verbose, workers),
+        Command::Aliasing {
+            task,
+            episodes,
+            seed,
+            k,
+            side,
+            render_size,
+        } => aliasing(&task, episodes, seed, k, side, render_size),
         Command::Generate {
             task,
             episodes,
@@ -534,7 +568,11 @@ fn expert_eval(
     repeat: Option<usize>,
     markdown: Option<PathBuf>,
     verbose: bool,
+    workers: usize,
 ) -> anyhow::Result<()> {
+    if workers == 0 {
+        return Err(BadInput("--workers must be at least 1".into()).into());
+    }
     if episodes == 0 {
         return Err(BadInput("--episodes must be at least 1".into()).into());
     }
@@ -579,10 +617,11 @@ fn expert_eval(
         "-".repeat(8)
     );
     println!("{header}\n{rule}");
-    let mut rows = Vec::new();
     let t0 = std::time::Instant::now();
-    let (mut total_eps, mut total_steps) = (0usize, 0usize);
-    for spec in &tasks {
+    let next = std::sync::atomic::AtomicUsize::new(0);
+    let results: std::sync::Mutex<Vec<Option<Vec<sim::expert::EpisodeResult>>>> =
+        std::sync::Mutex::new(vec![None; tasks.len()]);
+    let run_task = |spec: &sim::task::TaskSpec| -> anyhow::Result<Vec<sim::expert::EpisodeResult>> {
         let mut env = Env::from_task(
             spec,
             EnvConfig {
@@ -591,7 +630,7 @@ fn expert_eval(
             },
         )
         .map_err(classify)?;
-        let (mut ok, mut lens, mut tiered) = (0usize, Vec::new(), 0.0);
+        let mut out = Vec::with_capacity(episodes);
         for k in 0..episodes {
             let s = seed + k as u64;
             let r = sim::expert::run_episode_in(&mut env, spec, s, &cfg)
@@ -602,11 +641,39 @@ fn expert_eval(
                     spec.id, r.success, r.steps, r.tiered, r.end
                 );
             }
-            ok += r.success as usize;
-            tiered += r.tiered;
-            lens.push(r.steps);
-            total_steps += r.steps;
+            out.push(r);
         }
+        Ok(out)
+    };
+    std::thread::scope(|sc| -> anyhow::Result<()> {
+        let handles: Vec<_> = (0..workers.min(tasks.len()))
+            .map(|_| {
+                sc.spawn(|| -> anyhow::Result<()> {
+                    loop {
+                        let i = next.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+                        let Some(spec) = tasks.get(i) else {
+                            return Ok(());
+                        };
+                        let r = run_task(spec)?;
+                        results.lock().expect("no panics while locked")[i] = Some(r);
+                    }
+                })
+            })
+            .collect();
+        for h in handles {
+            h.join().expect("worker panicked")?;
+        }
+        Ok(())
+    })?;
+    let results = results.into_inner().expect("no panics while locked");
+    let mut rows = Vec::new();
+    let (mut total_eps, mut total_steps) = (0usize, 0usize);
+    for (spec, res) in tasks.iter().zip(results) {
+        let res = res.context("a task was not run")?;
+        let ok = res.iter().filter(|r| r.success).count();
+        let tiered: f64 = res.iter().map(|r| r.tiered).sum();
+        let lens: Vec<usize> = res.iter().map(|r| r.steps).collect();
+        total_steps += lens.iter().sum::<usize>();
         total_eps += episodes;
         let mean = lens.iter().sum::<usize>() as f64 / lens.len() as f64;
         let max = lens.iter().copied().max().unwrap_or(0);
@@ -626,16 +693,17 @@ fn expert_eval(
     }
     let secs = t0.elapsed().as_secs_f64();
     let thr = format!(
-        "{total_eps} episodes, {total_steps} steps in {secs:.1} s: {:.1} episodes/min, {:.0} steps/s (one thread, rendering off)",
+        "{total_eps} episodes, {total_steps} steps in {secs:.1} s: {:.1} episodes/min, {:.0} steps/s ({workers} worker thread{}, rendering off)",
         total_eps as f64 * 60.0 / secs,
-        total_steps as f64 / secs
+        total_steps as f64 / secs,
+        if workers == 1 { "" } else { "s" }
     );
     println!("\n{thr}");
     if let Some(md) = markdown {
         let mut s = String::new();
         s.push_str("# Scripted expert: success and episode lengths\n\n");
         s.push_str(&format!(
-            "Regenerate with `cargo run --release -p sim -- expert-eval --task {task} --episodes {episodes} --seed {seed}{} --markdown {}`.\n\n",
+            "Regenerate with `cargo run --release -p sim -- expert-eval --task {task} --episodes {episodes} --seed {seed}{} --markdown {}` (add `--workers 2` to run two tasks at a time; the table does not depend on it).\n\n",
             repeat.map(|n| format!(" --repeat {n}")).unwrap_or_default(),
             md.display()
         ));
@@ -740,4 +808,61 @@ fn assets(action: AssetsCmd) -> anyhow::Result<()> {
             Ok(())
         }
     }
+}
+
+fn aliasing(
+    task: &str,
+    episodes: usize,
+    seed: u64,
+    k: usize,
+    side: usize,
+    render_size: usize,
+) -> anyhow::Result<()> {
+    use sim::aliasing::{Features, analyse, collect};
+    if episodes == 0 {
+        return Err(BadInput("--episodes must be at least 1".into()).into());
+    }
+    let spec = sim::task::resolve(task).map_err(|e| BadInput(e.to_string()))?;
+    let t0 = std::time::Instant::now();
+    let frames = collect(&spec, episodes, seed, render_size, side).map_err(|e| match e {
+        sim::aliasing::AliasingError::Argument(m) => anyhow::Error::new(BadInput(m)),
+        sim::aliasing::AliasingError::Env(e) => classify(e),
+    })?;
+    println!(
+        "{}: {} frames from {episodes} expert episodes (seeds {seed}..{}) in {:.1} s; image {side}x{side} grey; neighbours exclude the same episode within ±{k} steps",
+        spec.id,
+        frames.len(),
+        seed + episodes as u64 - 1,
+        t0.elapsed().as_secs_f64()
+    );
+    println!(
+        "\n| features    | frames | NN needs other next subgoal (index) | (text) | NN from another episode |"
+    );
+    println!("|-------------|--------|------|------|------|");
+    let both = analyse(&frames, Features::Both, k);
+    for (name, which) in [
+        ("image+state", Features::Both),
+        ("image only", Features::Image),
+        ("state only", Features::State),
+    ] {
+        let r = if which == Features::Both {
+            both.clone()
+        } else {
+            analyse(&frames, which, k)
+        };
+        println!(
+            "| {name:<11} | {:>6} | {:>5.1}% | {:>5.1}% | {:>5.1}% |",
+            r.frames,
+            100.0 * r.index_fraction,
+            100.0 * r.text_fraction,
+            100.0 * r.cross_episode
+        );
+    }
+    println!(
+        "\nPer next subgoal (image+state):\n\n| # | next subgoal | frames | aliased |\n|---|---|---|---|"
+    );
+    for (l, text, n, f) in &both.per_label {
+        println!("| {l} | {text} | {n} | {:.1}% |", 100.0 * f);
+    }
+    Ok(())
 }

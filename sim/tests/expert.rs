@@ -48,6 +48,38 @@ fn a_libero_goal_task_succeeds_within_budget() {
     }
 }
 
+/// Runs the expert on `task` from `seed` and returns the result and the final qpos of the scene's
+/// articulated joints (drawers top, middle, bottom, then the stove knob in LIBERO-Goal scenes).
+fn articulations_after(task: &str, seed: u64) -> (sim::expert::EpisodeResult, Vec<f64>) {
+    let spec = registry::resolve(task).unwrap();
+    let mut env = Env::from_task(&spec, state_only()).unwrap();
+    let r = sim::expert::run_episode_in(&mut env, &spec, seed, &ExpertConfig::default()).unwrap();
+    let scene = env.scene().unwrap();
+    let q = scene
+        .instances
+        .iter()
+        .flat_map(|i| i.joints.iter().map(|&(_, adr, _)| env.data().qpos()[adr]))
+        .collect();
+    (r, q)
+}
+
+#[test]
+fn the_middle_drawer_is_pulled_open_and_the_knob_turned_on() {
+    let (r, q) = articulations_after("libero_goal/open_the_middle_drawer_of_the_cabinet", 0);
+    assert!(r.success, "{r:?}");
+    assert_eq!(q.len(), 4);
+    // Open means q < −0.14 (range −0.16…0.01); the other drawers and the knob are untouched.
+    assert!(q[1] < -0.14, "middle drawer at {}", q[1]);
+    assert!(q[0].abs() < 0.01 && q[2].abs() < 0.01, "{q:?}");
+    assert!(q[3].abs() < 0.05, "{q:?}");
+
+    let (r, q) = articulations_after("libero_goal/turn_on_the_stove", 0);
+    assert!(r.success, "{r:?}");
+    // On means q ≥ 0.5; the twist is 0.75 ± 0.05 rad.
+    assert!(q[3] >= 0.5 && q[3] < 1.0, "knob at {}", q[3]);
+    assert!(r.steps < 250, "{r:?}");
+}
+
 #[test]
 fn same_seed_same_actions_and_seeds_differ() {
     let a = actions("t1", 3, 80);

@@ -135,6 +135,23 @@ pub enum Op {
         /// Step limit.
         max: usize,
     },
+    /// Rotate the hand to `Rtilt · Rz(yaw) · R0` (R0 the initial orientation, Rtilt a rotation by `tilt`
+    /// radians about the horizontal axis `axis`), keeping the grip site in place; later moves hold that
+    /// orientation while `hold` (until the next `Orient`).
+    Orient {
+        /// Yaw about world z.
+        yaw: f64,
+        /// Horizontal tilt axis (world, unit).
+        axis: [f64; 3],
+        /// Tilt angle.
+        tilt: f64,
+        /// Gripper command.
+        grip: f32,
+        /// Step limit.
+        max: usize,
+        /// Hold the orientation during later moves.
+        hold: bool,
+    },
     /// Gripper command for a number of steps, arm still.
     Grip {
         /// +1 close, −1 open.
@@ -158,6 +175,14 @@ pub enum Op {
         /// Gripper command.
         grip: f32,
     },
+    /// Skip the next `count` ops when the goal tracker reports at least `n` satisfied subgoals (a
+    /// corrective retry that is only needed when a placement was not registered).
+    SkipIfSatisfied {
+        /// Subgoal count.
+        n: usize,
+        /// Ops to skip.
+        count: usize,
+    },
     /// Stay still until the pending atom has been false for `n` steps since the last append.
     WaitNonlive {
         /// Steps.
@@ -175,22 +200,6 @@ pub enum Op {
         max: usize,
         /// Gripper command.
         grip: f32,
-    },
-    /// Closed-loop push of an instance so that its origin reaches `to` (xy) within `tol`: the pusher
-    /// stays behind the object along the push direction at height `z` above the object origin.
-    Push {
-        /// Pushed instance.
-        inst: usize,
-        /// Goal point (xy used).
-        to: Point,
-        /// Object radius (m) the pusher keeps behind.
-        radius: f64,
-        /// Height of the grip site above the object's origin.
-        z: f64,
-        /// Tolerance (m).
-        tol: f64,
-        /// Step limit.
-        max: usize,
     },
     /// Marks the atom the plan now works towards (for [`Op::WaitNonlive`]).
     Pending(Option<Atom>),
@@ -228,6 +237,8 @@ pub struct Expert {
     op_start: Option<[f64; 3]>,
     planned: bool,
     init_rot: Option<Matrix3<f64>>,
+    /// Orientation held during moves (set by [`Op::Orient`]).
+    att: Option<Matrix3<f64>>,
     pending: Option<Atom>,
     nonlive: usize,
     last_satisfied: usize,
@@ -262,6 +273,7 @@ impl Expert {
             op_start: None,
             planned: false,
             init_rot: None,
+            att: None,
             pending: None,
             nonlive: 0,
             last_satisfied: 0,
@@ -311,18 +323,41 @@ impl Expert {
                 return Some([0.0, 0.0, 0.0, 0.0, 0.0, 0.0, -1.0]);
             }
             if let Some(a) = self.exec(scene, env, obs) {
+                if std::env::var("SIM_EXPERT_TRACE").is_ok_and(|v| v == "2") {
+                    eprintln!(
+                        "    step {:>3} op {:>2} eef {:.3?} fingers {:.4?} act {:.2?}",
+                        obs.step,
+                        self.cur,
+                        obs.eef_pos,
+                        &obs.state[6..8],
+                        a
+                    );
+                }
                 self.op_steps += 1;
                 return Some(clip(a));
             }
             if std::env::var_os("SIM_EXPERT_TRACE").is_some() {
+                let q: Vec<f64> = scene
+                    .instances
+                    .iter()
+                    .flat_map(|i| i.joints.iter().map(|&(_, adr, _)| env.data().qpos()[adr]))
+                    .collect();
+                let objs: Vec<[f64; 3]> = scene
+                    .instances
+                    .iter()
+                    .filter(|i| i.def.kind == crate::assets::AssetKind::Movable)
+                    .map(|i| env.data().body_pos(i.root_body))
+                    .collect();
                 eprintln!(
-                    "  step {:>3} op {:>2} done after {:>3} steps: {:?} eef {:.3?} sat {}",
+                    "  step {:>3} op {:>2} done after {:>3} steps: {:?} eef {:.3?} sat {} q {:.3?} objs {:.3?}",
                     obs.step,
                     self.cur,
                     self.op_steps,
                     short(&self.ops[self.cur]),
                     obs.eef_pos,
-                    sat
+                    sat,
+                    q,
+                    objs
                 );
             }
             self.cur += 1;
@@ -377,6 +412,42 @@ impl Expert {
                     a[k] = ((g * e[k]).clamp(-1.0, 1.0) + n) as f32;
                 }
                 a[6] = grip;
+                if let Some(goal) = self.att {
+                    let err = orientation_error(&goal, &quat_mat(obs.eef_quat));
+                    for k in 0..3 {
+                        a[3 + k] = (err[k] * 2.5).clamp(-1.0, 1.0) as f32;
+                    }
+                }
+                Some(a)
+            }
+            Op::Orient {
+                yaw,
+                axis,
+                tilt,
+                grip,
+                max,
+                hold,
+            } => {
+                let r0 = self.init_rot.unwrap_or_else(Matrix3::identity);
+                let rz = nalgebra::Rotation3::from_axis_angle(&nalgebra::Vector3::z_axis(), yaw);
+                let ax = nalgebra::Unit::new_normalize(nalgebra::Vector3::new(
+                    axis[0], axis[1], axis[2],
+                ));
+                let rt = nalgebra::Rotation3::from_axis_angle(&ax, tilt);
+                let goal = rt.into_inner() * rz.into_inner() * r0;
+                let err = orientation_error(&goal, &quat_mat(obs.eef_quat));
+                if err.norm() < 0.03 || self.op_steps >= max {
+                    self.att = hold.then_some(goal);
+                    return None;
+                }
+                let mut a = still(grip);
+                for k in 0..3 {
+                    a[3 + k] = (err[k] * 2.5).clamp(-1.0, 1.0) as f32;
+                }
+                let e = sub(start, eef);
+                for k in 0..3 {
+                    a[k] = (e[k] * 15.0).clamp(-1.0, 1.0) as f32;
+                }
                 Some(a)
             }
             Op::Yaw { yaw, grip, max } => {
@@ -387,6 +458,7 @@ impl Expert {
                 let cur = quat_mat(obs.eef_quat);
                 let err = orientation_error(&goal, &cur);
                 if err.norm() < 0.02 || self.op_steps >= max {
+                    self.att = None;
                     return None;
                 }
                 let mut a = still(grip);
@@ -406,6 +478,13 @@ impl Expert {
                 let sat = obs.goal.as_ref().map(|g| g.satisfied).unwrap_or(0);
                 (sat < n && self.op_steps < max).then_some(still(grip))
             }
+            Op::SkipIfSatisfied { n, count } => {
+                let sat = obs.goal.as_ref().map(|g| g.satisfied).unwrap_or(0);
+                if sat >= n {
+                    self.cur += count;
+                }
+                None
+            }
             Op::WaitNonlive { n, max, grip } => {
                 (self.nonlive < n && self.op_steps < max).then_some(still(grip))
             }
@@ -415,55 +494,6 @@ impl Expert {
                     .and_then(|p| p.eval(&atom.predicate, &atom.args).ok())
                     .unwrap_or(false);
                 (!holds && self.op_steps < max).then_some(still(grip))
-            }
-            Op::Push {
-                inst,
-                to,
-                radius,
-                z,
-                tol,
-                max,
-            } => {
-                let o = env.data().body_pos(scene.instances[inst].root_body);
-                let goal = point(scene, env, &to);
-                let d = [goal[0] - o[0], goal[1] - o[1]];
-                let dist = (d[0] * d[0] + d[1] * d[1]).sqrt();
-                if dist < tol || self.op_steps >= max {
-                    return None;
-                }
-                let u = [d[0] / dist, d[1] / dist];
-                // Where the pusher should be: behind the object, pushing through it.
-                let adv = dist.min(0.04);
-                let behind = [
-                    o[0] - u[0] * (radius - adv),
-                    o[1] - u[1] * (radius - adv),
-                    o[2] + z,
-                ];
-                // If the pusher is not behind the object, go around above it.
-                let rel = [eef[0] - o[0], eef[1] - o[1]];
-                let along = rel[0] * u[0] + rel[1] * u[1];
-                let lateral = (rel[0] * u[1] - rel[1] * u[0]).abs();
-                let t = if along > -radius + 0.01 || lateral > 0.03 {
-                    let pre = [
-                        o[0] - u[0] * (radius + 0.03),
-                        o[1] - u[1] * (radius + 0.03),
-                        o[2] + z,
-                    ];
-                    let dxy = ((eef[0] - pre[0]).powi(2) + (eef[1] - pre[1]).powi(2)).sqrt();
-                    if dxy > 0.015 {
-                        [pre[0], pre[1], o[2] + z + 0.08]
-                    } else {
-                        pre
-                    }
-                } else {
-                    behind
-                };
-                let e = sub(t, eef);
-                let mut a = still(1.0);
-                for k in 0..3 {
-                    a[k] = (e[k] * 12.0 * self.speed).clamp(-0.6, 0.6) as f32;
-                }
-                Some(a)
             }
         }
     }
@@ -653,35 +683,46 @@ while let Some(action) = expert.act(&env, &obs) {             // None: demonstra
   metre, to a live target: a point on an object, or *carry* — the held object's origin to a destination),
   yaw, gripper open/close (10–12 steps, fully closed before lifting), hold, wait for the tracker.
 * **Grasps.** Bowl: pinch the rim wall on the ±y side whose neighbourhood is freer (the 20 cm hand box is
-  checked against tall objects and fixtures, decided on the live state); bowls beyond ~0.72 m from the
-  shoulder are pinched at the near (−x) rim with the hand yawed 90°. Bottle: the neck. Cream cheese: across
-  its 4.3 cm width. Basket: the wall facing ±y, then slid 1.5 cm above the table. Plate: pushed with the
-  closed fingers (closed-loop, pusher kept behind the plate along the push direction).
-* **Reach.** A straight arm is a singularity the OSC cannot leave; far out the expert first pulls in
-  towards the shoulder before lifting and carries lower.
+  checked against tall objects and fixtures, decided on the live state; on a tie, the side that is free
+  at the destination); bowls beyond ~0.72 m from the shoulder, or under an open drawer, are pinched at
+  the near (−x) rim with the hand yawed 90°. Bottle: the neck (hand yawed 90° when the rack is beside
+  it). Cream cheese: across its 4.3 cm width. Basket: the wall facing ±y, then slid 1.5 cm above the
+  table. Plate: its +y rim pinched, lifted 8 cm (over the cream cheese) and set down in the region
+  where its footprint clears the objects already there.
+* **Articulated fixtures.** Drawers: the hand is yawed so the fingers close along the handle bar and
+  tilted ~40° about the horizontal so it stays in front of the drawer above; it slides in around the
+  bar's ends, pinches them and pulls 16 cm along the slide (moves hold that orientation). Stove: the
+  fingers pinch the knob's pointer bar across its thickness and the wrist twists 0.75 rad.
+* **Reach.** A straight arm is a singularity the OSC cannot leave: far out the expert first pulls in
+  towards the shoulder before lifting and carries lower, pulls in again after releasing far out, aims
+  far object destinations 1.5 cm towards the shoulder (On allows 3 cm), puts an object back where it
+  was taken from with a short 4.5 cm lift instead, and sets things on the cabinet top on its near half.
 * **Tracker timing.** The expert follows the tracker's debounce: it keeps a lifted object away until the
   pending atom has been false ≥ 17 steps since the last append, holds the placed state until the tracker
   appends it, and moves the same object on without releasing when the next subgoal is about it (the
-  repetition family never lets go of the bowl/bottle). After the last subgoal it releases, retreats 6 cm
-  and holds 5 steps; nothing is disturbed after completion.
+  repetition family never lets go of the bowl/bottle). A placement the tracker did not register within
+  25 steps is retried once (lift 2.5 cm, re-centre, set down). After the last subgoal it releases,
+  retreats 6 cm and holds 5 steps; nothing is disturbed after completion.
 * **Variation** (ChaCha8 from the episode seed): approach/placement offsets (±2–6 mm), grasp height, a
   per-episode speed factor (0.85–1.15), 0–3-step pauses, Gaussian noise σ = 0.03 on translation actions
-  while moving, rim side on ties, branch choice (T7).
+  while moving, rim side on ties, branch choice (T7), drawer tilt (±0.05 rad), knob twist (±0.05 rad).
+
+## Asset changes made for the expert
+
+* `wooden_cabinet`: the drawer handles are 5 cm bars standing 2.5 cm proud of the drawer fronts on two
+  posts (they stood 9 mm proud, too little for a fingertip; LIBERO's handles protrude similarly).
+* `flat_stove`: the knob joint is a light part (0.1 kg, inertia 2·10⁻⁴ kg·m², damping 0.02, armature
+  5·10⁻⁴) instead of LIBERO's placeholder inertial (3 kg, 1 kg·m², damping 1), which no fingertip could
+  turn by 0.5 rad within the budget. The `turn_on` threshold (q ≥ 0.5) is unchanged.
 
 ## Known limitations
 
-* `open_the_middle_drawer_of_the_cabinet`, `open_the_top_drawer_and_put_the_bowl_inside`: the hand is
-  yawed 90° to pinch the handle bar's ends (70 mm between 79 mm fingers) but the pull does not open the
-  drawer reliably yet (the handle stands only 9 mm proud of the drawer front; the 6 cm hand box meets the
-  carcass above the middle drawer).
-* `turn_on_the_stove`: the closed fingers push the knob's pointer bar, but the stove sits ~0.3 m from the
-  base where the elbow is near its limit; the knob (3 kg, inertia 1 kg·m², damping 1) does not reach 0.5 rad.
-* `push_the_plate_to_the_front_of_the_stove`: the closed-loop push does not bring the plate into the
-  8 × 8 cm region reliably.
-* `put_the_wine_bottle_on_the_rack`: no plan for laying the bottle into the tilted cradle yet (the generic
-  place puts it upright at the region, which `On` rejects).
-* `put_the_wine_bottle_on_top_of_the_cabinet`: the cabinet top (z ≈ 1.13) at ~0.73 m from the shoulder is
-  at the edge of the reach with a bottle held by the neck.
+* `put_the_wine_bottle_on_the_rack`: no working plan. The rack's `top_region` is a slab tilted 62.5°
+  (LIBERO's site); an upright bottle set at the site satisfies `On` while held (the tracker appends it)
+  but falls once released, and laying the bottle into the tilted cradle needs the hand pitched ~90° with
+  the bottle inside the rack's frame, which the current primitives do not do.
+* `open_the_top_drawer_and_put_the_bowl_inside` runs close to its 300-step budget (open, take the bowl
+  from under the open drawer, drop it in).
 * Long multi-object tasks (T7, T8) use most of their step budget (transport speed is bounded by OSC_POSE's
-  ~1.5 cm per step).
+  ~1.5 cm per step); the remaining failures there are arm poses near full stretch the OSC cannot leave.
 "#;

@@ -56,6 +56,12 @@ pub(super) struct Builder<'a> {
     yaw: f64,
     held_grasp_xy: Option<[f64; 2]>,
     expected: Vec<(usize, [f64; 3])>,
+    /// Take bowls by the near (−x) rim with the hand along x.
+    near_rim: bool,
+    /// Where the object about to be grasped is going (for the choice of its rim side).
+    next_dest: Option<[f64; 3]>,
+    /// The destination is inside an open drawer (carry above its front, drop low).
+    into_drawer: bool,
 }
 
 impl<'a> Builder<'a> {
@@ -75,6 +81,9 @@ impl<'a> Builder<'a> {
             yaw: 0.0,
             held_grasp_xy: None,
             expected: Vec::new(),
+            near_rim: false,
+            into_drawer: false,
+            next_dest: None,
         }
     }
 
@@ -245,18 +254,24 @@ impl<'a> Builder<'a> {
                 };
                 let Some(site) = r.site else { return };
                 if !r.joints.is_empty() {
-                    // A drawer: open it first.
-                    self.open_drawer(&atom.args[1]);
+                    // A drawer: open it first; the open drawer overhangs the table in front of the
+                    // cabinet, so the object is taken from the robot's side and dropped a little
+                    // outwards of the region's centre (clear of the carcass).
+                    let out = self.open_drawer(&atom.args[1]);
+                    self.near_rim = true;
+                    self.into_drawer = true;
                     self.pick_place(
                         obj,
                         Point::Site {
                             site,
-                            off: [0.0, 0.0, 0.0],
+                            off: [out[0] * 0.015, out[1] * 0.015, 0.0],
                         },
                         n,
                         next_obj,
                         true,
                     );
+                    self.near_rim = false;
+                    self.into_drawer = false;
                 } else {
                     self.pick_place(
                         obj,
@@ -271,7 +286,7 @@ impl<'a> Builder<'a> {
                 }
             }
             "open" => {
-                self.open_drawer(&atom.args[0]);
+                let _ = self.open_drawer(&atom.args[0]);
                 self.ops.push(Op::WaitSatisfied {
                     n,
                     max: 30,
@@ -280,13 +295,8 @@ impl<'a> Builder<'a> {
             }
             "turnon" => {
                 if let Some(stove) = self.inst(&atom.args[0]) {
-                    self.turn_knob(stove);
+                    self.turn_knob(stove, n);
                 }
-                self.ops.push(Op::WaitSatisfied {
-                    n,
-                    max: 30,
-                    grip: OPEN,
-                });
             }
             _ => {}
         }
@@ -306,8 +316,10 @@ impl<'a> Builder<'a> {
     fn grasp_offset(&mut self, obj: usize) -> GraspAt {
         let cat = self.cat(obj);
         let (off, local, above) = match cat {
-            "akita_black_bowl" if horizontal_reach(self.expected_pos(obj)) > 0.72 => {
-                // Far out: yaw the hand by 90° and pinch the near (−x) rim.
+            "akita_black_bowl"
+                if self.near_rim || horizontal_reach(self.expected_pos(obj)) > 0.72 =>
+            {
+                // Far out (or under an open drawer): yaw the hand by 90° and pinch the near (−x) rim.
                 (
                     [-0.0485, self.jit(0.003), 0.041 + self.jit(0.003)],
                     false,
@@ -315,8 +327,12 @@ impl<'a> Builder<'a> {
                 )
             }
             "akita_black_bowl" => {
-                // Pinch the rim wall at ±y (fingers open along world y).
-                let coin = self.vary && self.rng.random_bool(0.5);
+                // Pinch the rim wall at ±y (fingers open along world y). Where both sides are free here,
+                // take the one that is free at the destination (the hand keeps that side there).
+                let mut coin = self.vary && self.rng.random_bool(0.5);
+                if let Some(d) = self.next_dest {
+                    coin = clear_side(self.scene, self.env, obj, d, 0.0485, coin) > 0.0;
+                }
                 let off = [self.jit(0.004), 0.0485, 0.041 + self.jit(0.003)];
                 return GraspAt::Rim {
                     off,
@@ -377,9 +393,11 @@ impl<'a> Builder<'a> {
                 },
             ),
         };
-        let far =
-            self.cat(obj) == "akita_black_bowl" && horizontal_reach(self.expected_pos(obj)) > 0.72;
-        let want_yaw = if far {
+        let far = self.cat(obj) == "akita_black_bowl"
+            && (self.near_rim || horizontal_reach(self.expected_pos(obj)) > 0.72);
+        let want_yaw = if far
+            || (self.cat(obj) == "wine_bottle" && self.hand_blocked_along_y(self.expected_pos(obj)))
+        {
             std::f64::consts::FRAC_PI_2
         } else {
             0.0
@@ -396,9 +414,23 @@ impl<'a> Builder<'a> {
                 max: 25,
             });
         }
-        self.mv(Target::Grip(pre), 0.02, 90, 12.0);
-        self.pause(OPEN);
-        self.mv(Target::Grip(at), 0.005, 40, 10.0);
+        if self.near_rim && self.cat(obj) == "akita_black_bowl" {
+            // Under an open drawer: the hand (along x) reaches 10 cm past the rim, so it comes down
+            // 7.5 cm further out, below the drawer's bottom, and slides in.
+            let body = |x: f64, z: f64| Point::Body {
+                inst: obj,
+                off: [x, 0.0, z],
+                local: false,
+            };
+            self.mv(Target::Grip(body(-0.125, 0.28)), 0.03, 40, 12.0);
+            self.mv(Target::Grip(body(-0.125, 0.066)), 0.01, 40, 14.0);
+            self.mv(Target::Grip(body(-0.0485, 0.062)), 0.008, 30, 14.0);
+            self.mv(Target::Grip(at), 0.005, 30, 16.0);
+        } else {
+            self.mv(Target::Grip(pre), 0.02, 90, 12.0);
+            self.pause(OPEN);
+            self.mv(Target::Grip(at), 0.005, 40, 13.0);
+        }
         let extra = if self.vary {
             self.rng.random_range(0..3)
         } else {
@@ -406,11 +438,35 @@ impl<'a> Builder<'a> {
         };
         self.ops.push(Op::Grip {
             cmd: CLOSE,
-            steps: 10 + extra,
+            steps: 9 + extra,
         });
         self.held = Some(obj);
         let p = self.pos(obj);
         self.held_grasp_xy = Some([p[0], p[1]]);
+    }
+
+    /// Whether the hand (20 cm long along its finger axis) would meet a tall fixture when held with that
+    /// axis along y over `p` while the same hand along x would not.
+    fn hand_blocked_along_y(&self, p: [f64; 3]) -> bool {
+        let clearance = |dx: f64, dy: f64| -> f64 {
+            let mut best = f64::MAX;
+            for inst in &self.scene.instances {
+                let rad = match inst.def.category {
+                    "wine_rack" => 0.19,
+                    "wooden_cabinet" => 0.17,
+                    _ => continue,
+                };
+                let q = self.env.data().body_pos(inst.root_body);
+                for t in [-1.0, -0.5, 0.0, 0.5, 1.0] {
+                    let g = [p[0] + t * dx, p[1] + t * dy];
+                    let d = ((q[0] - g[0]).powi(2) + (q[1] - g[1]).powi(2)).sqrt() - rad;
+                    best = best.min(d);
+                }
+            }
+            best
+        };
+        let along_y = clearance(0.0, 0.1);
+        along_y < 0.0 && clearance(0.1, 0.0) > along_y
     }
 
     fn release(&mut self) {
@@ -421,11 +477,14 @@ impl<'a> Builder<'a> {
         };
         self.ops.push(Op::Grip {
             cmd: OPEN,
-            steps: 8 + extra,
+            steps: 7 + extra,
         });
         self.held = None;
         let up = 0.07 + self.jit(0.015);
         self.mv(Target::Rel([0.0, 0.0, up]), 0.015, 30, 12.0);
+        // Far out the arm is nearly straight (a singularity OSC cannot leave): come back in towards
+        // the shoulder before the next move (no motion when already within reach).
+        self.mv(Target::PullIn { h: 0.66, dz: 0.0 }, 0.015, 25, 12.0);
     }
 
     /// Height of the held object's origin while carrying.
@@ -445,10 +504,18 @@ impl<'a> Builder<'a> {
             if self.held.is_some() {
                 self.release();
             }
+            self.next_dest = Some(match &to {
+                Point::Body { inst, .. } | Point::Rim { inst, .. } => self.pos(*inst),
+                Point::Site { site, .. } => self.env.data().site_pos(*site),
+                Point::Abs(p) => *p,
+            });
             self.grasp(obj);
+            self.next_dest = None;
         }
         let into_basket =
             drop && matches!(&to, Point::Site { .. }) && self.cat(obj) == "cream_cheese";
+        let to = self.within_reach(to);
+        let before = self.expected_pos(obj);
         if let Point::Body { inst, .. } = &to {
             let p = self.pos(*inst);
             self.expected.push((obj, p));
@@ -464,6 +531,12 @@ impl<'a> Builder<'a> {
         if far && !into_basket {
             cz -= 0.035;
         }
+        if self.into_drawer
+            && let Point::Site { site, .. } = &to
+        {
+            // Over the drawer's front panel (its top is ~3 cm above the region's centre).
+            cz = cz.max(self.env.data().site_pos(*site)[2] + 0.06);
+        }
         // Raised destinations (cabinet top, stove): clear them by a few centimetres.
         if let Point::Site { site, .. } = &to {
             let sz = self.env.data().site_pos(*site)[2];
@@ -471,21 +544,47 @@ impl<'a> Builder<'a> {
                 cz = cz.max(sz + 0.05);
             }
         }
+        if self.near_rim && self.cat(obj) == "akita_black_bowl" {
+            // Out from under the open drawer before lifting.
+            self.mv(Target::Rel([-0.06, 0.0, 0.004]), 0.01, 20, 12.0);
+        }
         // Lift straight up first.
         let o = self.pos(obj);
         let lift = cz - o[2];
         let lz = lift.max(0.05) + self.jit(0.01);
-        // Far out, first pull in towards the shoulder at low height (a straight arm is a singularity
-        // OSC cannot leave; high poses reach less far), then lift.
-        self.mv(Target::PullIn { h: 0.63, dz: 0.03 }, 0.015, 30, 12.0);
-        self.mv(
-            Target::Rel([0.0, 0.0, (lz - 0.03).max(0.02)]),
-            0.02,
-            40,
-            12.0,
-        );
+        // Put back where it was taken from, far out: lift just clear and stay out there (pulling in and
+        // lifting high would leave the object out of reach for the way back).
+        let back_in_place = matches!(&to, Point::Body { .. })
+            && ((before[0] - dest_p[0]).powi(2) + (before[1] - dest_p[1]).powi(2)).sqrt() < 0.02
+            && horizontal_reach(dest_p) > 0.68;
+        if back_in_place {
+            cz = before[2] + 0.045 + self.jit(0.005);
+            self.mv(Target::Rel([0.0, 0.0, cz - before[2]]), 0.01, 30, 12.0);
+        } else {
+            // Far out, first pull in towards the shoulder at low height (a straight arm is a singularity
+            // OSC cannot leave; high poses reach less far), then lift.
+            self.mv(Target::PullIn { h: 0.63, dz: 0.03 }, 0.015, 30, 12.0);
+            self.mv(
+                Target::Rel([0.0, 0.0, (lz - 0.03).max(0.02)]),
+                0.02,
+                40,
+                12.0,
+            );
+        }
+        if self.into_drawer {
+            // All the way up before moving over the drawer's front panel.
+            self.mv(Target::RelZ(cz + 0.045), 0.008, 30, 12.0);
+        }
         // Over the destination at carry height.
-        let (jx, jy) = (self.jit(0.004), self.jit(0.004));
+        let (mut jx, mut jy) = (self.jit(0.004), self.jit(0.004));
+        // Far out, set objects down on the near side of an object destination (On allows 3 cm): the
+        // arm stays less stretched and can come back.
+        let reach = horizontal_reach(dest_p);
+        if matches!(&to, Point::Body { .. }) && reach > 0.7 {
+            let k = (reach - 0.7).min(0.015) / reach;
+            jx += (SHOULDER[0] - dest_p[0]) * k;
+            jy += (SHOULDER[1] - dest_p[1]) * k;
+        }
         let hover = match &to {
             Point::Body { inst, off, local } => Point::Body {
                 inst: *inst,
@@ -525,7 +624,7 @@ impl<'a> Builder<'a> {
             let z = if into_basket {
                 TABLE_TOP + 0.165 - s[2]
             } else {
-                0.03
+                0.045
             };
             (true, z)
         } else {
@@ -553,6 +652,7 @@ impl<'a> Builder<'a> {
             Point::Rim { .. } => to.clone(),
         };
         if drop {
+            let g = if self.into_drawer { 14.0 } else { 10.0 };
             self.mv(
                 Target::Carry {
                     held: obj,
@@ -560,7 +660,7 @@ impl<'a> Builder<'a> {
                 },
                 0.006,
                 45,
-                10.0,
+                g,
             );
             self.release();
             self.ops.push(Op::WaitSatisfied {
@@ -573,18 +673,81 @@ impl<'a> Builder<'a> {
         self.place_mv(
             Target::Carry {
                 held: obj,
-                to: place,
+                to: place.clone(),
             },
             45,
         );
         self.ops.push(Op::WaitSatisfied {
             n,
-            max: 40,
+            max: 25,
+            grip: CLOSE,
+        });
+        // Not appended (set down off-centre, or not touching): lift a little, re-centre and set it down
+        // again. Skipped when the tracker has appended.
+        self.ops.push(Op::SkipIfSatisfied { n, count: 4 });
+        self.mv(Target::Rel([0.0, 0.0, 0.025]), 0.006, 15, 12.0);
+        let above = match &place {
+            Point::Body { inst, off, local } => Point::Body {
+                inst: *inst,
+                off: [off[0], off[1], off[2] + 0.02],
+                local: *local,
+            },
+            Point::Site { site, off } => Point::Site {
+                site: *site,
+                off: [off[0], off[1], off[2] + 0.02],
+            },
+            other => other.clone(),
+        };
+        self.mv(
+            Target::Carry {
+                held: obj,
+                to: above,
+            },
+            0.004,
+            30,
+            10.0,
+        );
+        self.place_mv(
+            Target::Carry {
+                held: obj,
+                to: place,
+            },
+            30,
+        );
+        self.ops.push(Op::WaitSatisfied {
+            n,
+            max: 30,
             grip: CLOSE,
         });
         self.pause(CLOSE);
         if next_obj != Some(obj) {
             self.release();
+        }
+    }
+
+    /// A large raised surface (the cabinet top) near the edge of the reach: move the target towards the
+    /// shoulder, keeping 4.5 cm inside the region.
+    fn within_reach(&self, to: Point) -> Point {
+        let Point::Site { site, off } = to else {
+            return to;
+        };
+        let s = self.env.data().site_pos(site);
+        let half = self.scene.model.site_size(site);
+        let far = horizontal_reach(s) - 0.6;
+        if far <= 0.0 || half[0].min(half[1]) < 0.08 {
+            return Point::Site { site, off };
+        }
+        let (ux, uy) = (SHOULDER[0] - s[0], SHOULDER[1] - s[1]);
+        let n = (ux * ux + uy * uy).sqrt();
+        let mut d = [ux / n * far, uy / n * far];
+        // Sites of fixtures placed at yaw 0 or π: half sizes stay along x and y.
+        for k in 0..2 {
+            let lim = half[k] - 0.045;
+            d[k] = d[k].clamp(-lim, lim);
+        }
+        Point::Site {
+            site,
+            off: [off[0] + d[0], off[1] + d[1], off[2]],
         }
     }
 
@@ -618,43 +781,114 @@ impl<'a> Builder<'a> {
         self.release();
     }
 
-    /// Push a plate (closed gripper, low) until its origin is at `site`'s xy.
+    /// Move a plate onto a table region: pinch its +y rim (the side away from the cabinet), lift it a few
+    /// centimetres (over low objects), carry it and set it down where its footprint clears the objects
+    /// already standing in the region.
     fn push_to(&mut self, obj: usize, site: usize, n: usize) {
         if self.held.is_some() {
             self.release();
         }
+        let p = self.pos(obj);
+        let s = self.env.data().site_pos(site);
+        let gx = s[0] + self.jit(0.008);
+        // Plate radius 0.069: keep its rim 1 cm clear of objects beside the region's near (−y) side.
+        let mut gy = s[1] + 0.005;
+        for (k, inst) in self.scene.instances.iter().enumerate() {
+            if k == obj || inst.def.kind != crate::assets::AssetKind::Movable {
+                continue;
+            }
+            let o = self.env.data().body_pos(inst.root_body);
+            if (o[0] - gx).abs() < 0.069 + 0.045 && o[1] < gy {
+                let r = if inst.def.category == "cream_cheese" {
+                    0.0215
+                } else {
+                    0.055
+                };
+                gy = gy.max(o[1] + r + 0.069 + 0.01);
+            }
+        }
+        let gy = gy.min(s[1] + 0.034) + self.jit(0.003);
+        // The rim wall's mid-height (r 0.0625, z 0.009) between the pads.
+        let zg = 0.006 + self.jit(0.001);
+        let rim = [self.jit(0.004), 0.0625 + self.jit(0.002)];
         self.ops.push(Op::Grip {
-            cmd: CLOSE,
+            cmd: OPEN,
             steps: 0,
         });
-        let (jx, jy) = (self.jit(0.01), self.jit(0.01));
-        self.ops.push(Op::Push {
-            inst: obj,
-            to: Point::Site {
-                site,
-                off: [jx, jy, 0.0],
-            },
-            radius: 0.069 + 0.012,
-            z: 0.012,
-            tol: 0.012,
-            max: 220,
+        if self.yaw.abs() > 1e-6 {
+            self.yaw = 0.0;
+            self.ops.push(Op::Yaw {
+                yaw: 0.0,
+                grip: OPEN,
+                max: 25,
+            });
+        }
+        self.mv(
+            Target::Grip(Point::Body {
+                inst: obj,
+                off: [rim[0], rim[1], zg + 0.06],
+                local: false,
+            }),
+            0.015,
+            80,
+            12.0,
+        );
+        self.mv(
+            Target::Grip(Point::Body {
+                inst: obj,
+                off: [rim[0], rim[1], zg],
+                local: false,
+            }),
+            0.004,
+            40,
+            10.0,
+        );
+        self.ops.push(Op::Grip {
+            cmd: CLOSE,
+            steps: 12,
         });
+        self.held = Some(obj);
+        // Held by one edge the plate tilts: lift it well clear of low objects before moving.
+        let lift = p[2] + 0.08;
+        self.mv(Target::Rel([0.0, 0.0, 0.08]), 0.01, 30, 12.0);
+        self.mv(
+            Target::Carry {
+                held: obj,
+                to: Point::Abs([gx, gy, lift]),
+            },
+            0.008,
+            90,
+            12.0,
+        );
+        self.mv(
+            Target::Carry {
+                held: obj,
+                to: Point::Abs([gx, gy, p[2] + 0.001]),
+            },
+            0.004,
+            40,
+            8.0,
+        );
         self.ops.push(Op::WaitSatisfied {
             n,
-            max: 20,
+            max: 30,
             grip: CLOSE,
         });
-        self.mv(Target::Rel([0.0, 0.0, 0.08]), 0.015, 25, 12.0);
+        self.release();
     }
 
-    /// Open the drawer owning region `region`: yaw the hand so the fingers straddle the handle bar, pull.
-    fn open_drawer(&mut self, region: &str) {
+    /// Open the drawer owning region `region`: the hand, yawed so the fingers close along the handle bar
+    /// and tilted ~40° so it stays out in front of the drawers above, slides in around the bar's ends,
+    /// pinches them and pulls the drawer out along its slide.
+    fn open_drawer(&mut self, region: &str) -> [f64; 3] {
         let Some(r) = self.scene.regions.get(region) else {
-            return;
+            return [0.0; 3];
         };
-        let Some(cab) = r.parent else { return };
+        let Some(cab) = r.parent else {
+            return [0.0; 3];
+        };
         let Some(&(_, qadr, _)) = r.joints.first() else {
-            return;
+            return [0.0; 3];
         };
         let level = region.trim_start_matches(&format!("{}_", self.scene.instances[cab].name));
         let n0 = match level {
@@ -664,7 +898,7 @@ impl<'a> Builder<'a> {
         };
         let name = format!("{}_g{}", self.scene.instances[cab].name, n0 + 5);
         let Some(geom) = self.scene.model.id(ObjType::Geom, &name) else {
-            return;
+            return [0.0; 3];
         };
         let hp = self.env.data().geom_pos(geom);
         let q = self
@@ -673,32 +907,47 @@ impl<'a> Builder<'a> {
             .body_quat(self.scene.instances[cab].root_body);
         let out = qrot(q, [0.0, -1.0, 0.0]);
         let q0 = self.env.data().qpos()[qadr];
-        // Fingers along the bar (cabinet x): rotate the hand by 90° about z.
+        let yaw = out[1].atan2(out[0]);
+        let axis = [out[1], -out[0], 0.0];
+        let phi = 0.7 + self.jit(0.05);
+        // Where the fingers point once tilted: into the cabinet and down.
+        let app = [-out[0] * phi.sin(), -out[1] * phi.sin(), -phi.cos()];
+        let at = [
+            hp[0] + self.jit(0.002),
+            hp[1] + self.jit(0.002),
+            hp[2] + self.jit(0.002),
+        ];
+        let back = |d: f64| [at[0] - app[0] * d, at[1] - app[1] * d, at[2] - app[2] * d];
         self.ops.push(Op::Grip {
             cmd: OPEN,
             steps: 0,
         });
-        self.yaw = std::f64::consts::FRAC_PI_2;
-        let pre = [hp[0] + out[0] * 0.012, hp[1] + out[1] * 0.012, hp[2] + 0.08];
-        self.mv(Target::Grip(Point::Abs(pre)), 0.02, 80, 12.0);
-        self.ops.push(Op::Yaw {
-            yaw: self.yaw,
-            grip: OPEN,
-            max: 30,
-        });
-        let at = [pre[0], pre[1], hp[2] - 0.002];
-        self.mv(Target::Grip(Point::Abs(at)), 0.005, 40, 10.0);
+        // Turn while moving to a point out in front of the handle; finish the turn there.
+        self.yaw = yaw;
+        for max in [0, 20] {
+            self.ops.push(Op::Orient {
+                yaw,
+                axis,
+                tilt: -phi,
+                grip: OPEN,
+                max,
+                hold: true,
+            });
+            if max == 0 {
+                self.mv(Target::Grip(Point::Abs(back(0.12))), 0.02, 80, 12.0);
+            }
+        }
+        self.mv(Target::Grip(Point::Abs(at)), 0.004, 50, 14.0);
         self.ops.push(Op::Grip {
             cmd: CLOSE,
             steps: 10,
         });
-        self.held = None;
-        let pull = 0.158 + q0;
+        let pull = 0.165 + q0;
         let dst = add(at, [out[0] * pull, out[1] * pull, 0.0]);
         self.ops.push(Op::Move {
             target: Target::Grip(Point::Abs(dst)),
             grip: CLOSE,
-            tol: 0.006,
+            tol: 0.008,
             max: 60,
             gain: 10.0,
             until_pending: false,
@@ -707,58 +956,88 @@ impl<'a> Builder<'a> {
             cmd: OPEN,
             steps: 8,
         });
-        self.mv(Target::Rel([0.0, 0.0, 0.08]), 0.015, 30, 12.0);
-        self.yaw = 0.0;
-        self.ops.push(Op::Yaw {
-            yaw: 0.0,
+        self.held = None;
+        self.mv(
+            Target::Rel([-app[0] * 0.06, -app[1] * 0.06, -app[2] * 0.06 + 0.03]),
+            0.015,
+            30,
+            12.0,
+        );
+        // Level the hand (same yaw) during the next move.
+        self.ops.push(Op::Orient {
+            yaw,
+            axis,
+            tilt: 0.0,
             grip: OPEN,
-            max: 30,
+            max: 0,
+            hold: true,
         });
+        out
     }
 
-    /// Turn a stove knob on by pushing its pointer bar around the axis with the closed fingers.
-    fn turn_knob(&mut self, stove: usize) {
-        let b = self.scene.instances[stove].root_body;
+    /// Turn a stove knob on: pinch its pointer bar across its thickness with the hand yawed along the
+    /// bar, then twist the wrist about the knob's axis.
+    fn turn_knob(&mut self, stove: usize, n: usize) {
         let Some(knob) = self.scene.model.id(
             ObjType::Body,
             &format!("{}_knob", self.scene.instances[stove].name),
         ) else {
             return;
         };
-        let _ = b;
         let c = self.env.data().body_pos(knob);
         let q = self.env.data().body_quat(knob);
-        // Bar along the knob's local y; a +z rotation moves its +y end towards local −x. The closed
-        // fingertips go down beside the bar (+x side, near its +y end) and push along −x until on.
-        let yb = 0.012 + self.jit(0.002);
-        let z = c[2] + 0.030;
-        // Fingers closed throughout (grip_now() follows `held`).
-        self.held = Some(stove);
+        // The bar runs along the knob's local y; the fingers (opening along world y at yaw 0) must close
+        // across it, i.e. along the knob's local x.
+        let bx = qrot(q, [1.0, 0.0, 0.0]);
+        let bar_yaw = bx[1].atan2(bx[0]) - std::f64::consts::FRAC_PI_2;
+        let yaw0 = wrap_half_turn(bar_yaw);
+        let z = c[2] + 0.026 + self.jit(0.002);
         self.ops.push(Op::Grip {
-            cmd: CLOSE,
+            cmd: OPEN,
             steps: 0,
         });
-        let start = qrot(q, [0.024, yb, 0.0]);
-        let pre = [c[0] + start[0], c[1] + start[1], z + 0.06];
+        let pre = [c[0], c[1], z + 0.07];
         self.mv(Target::Grip(Point::Abs(pre)), 0.015, 80, 12.0);
-        self.mv(
-            Target::Grip(Point::Abs([pre[0], pre[1], z])),
-            0.005,
-            30,
-            10.0,
-        );
-        let end = qrot(q, [-0.03, yb, 0.0]);
-        self.ops.push(Op::Move {
-            target: Target::Grip(Point::Abs([c[0] + end[0], c[1] + end[1], z])),
+        self.yaw = yaw0;
+        self.ops.push(Op::Yaw {
+            yaw: yaw0,
+            grip: OPEN,
+            max: 30,
+        });
+        self.mv(Target::Grip(Point::Abs([c[0], c[1], z])), 0.004, 40, 10.0);
+        self.ops.push(Op::Grip {
+            cmd: CLOSE,
+            steps: 10,
+        });
+        // Positive knob angle = counter-clockwise about the (upward) knob axis.
+        let turn = 0.75 + self.jit(0.05);
+        self.yaw = yaw0 + turn;
+        self.ops.push(Op::Yaw {
+            yaw: self.yaw,
             grip: CLOSE,
-            tol: 0.004,
-            max: 80,
-            gain: 14.0,
-            until_pending: true,
+            max: 40,
+        });
+        self.ops.push(Op::WaitSatisfied {
+            n,
+            max: 20,
+            grip: CLOSE,
+        });
+        self.ops.push(Op::Grip {
+            cmd: OPEN,
+            steps: 8,
         });
         self.mv(Target::Rel([0.0, 0.0, 0.07]), 0.015, 25, 12.0);
-        self.held = None;
     }
+}
+
+/// An angle wrapped into (−π/2, π/2] (a parallel gripper is symmetric under a half turn).
+fn wrap_half_turn(a: f64) -> f64 {
+    let pi = std::f64::consts::PI;
+    let mut a = a.rem_euclid(pi);
+    if a > pi / 2.0 {
+        a -= pi;
+    }
+    a
 }
 
 /// The ±y side of `obj` whose neighbourhood is freer: the hand (20 cm long along y) reaches past the
