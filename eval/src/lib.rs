@@ -272,7 +272,7 @@ pub fn run_episode(
 /// An environment configured for `policy` (rendering only when it needs images or when recording).
 pub fn env_for(task: &TaskSpec, policy: &dyn Policy, cfg: &EvalConfig) -> Result<Env, EvalError> {
     let record = cfg.record.is_some();
-    Ok(Env::from_task_with_assets(
+    Env::from_task_with_assets(
         task,
         EnvConfig {
             render: policy.needs_images() || record,
@@ -290,7 +290,7 @@ pub fn env_for(task: &TaskSpec, policy: &dyn Policy, cfg: &EvalConfig) -> Result
     .map_err(|e| match e {
         sim::EnvError::Config(m) => EvalError::Argument(m),
         other => other.into(),
-    })?)
+    })
 }
 
 /// Progress of [`evaluate`], reported after every episode.
