@@ -215,6 +215,7 @@ pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
     tmp.as_file()
         .sync_all()
         .map_err(|e| DataError::io(path, e))?;
+    set_readable(tmp.as_file(), path)?;
     tmp.persist(path)
         .map_err(|e| DataError::io(path, e.error))?;
     Ok(())
