@@ -361,27 +361,15 @@ impl Env {
                 World::Task(scene, _) => scene.sample_init(&mut self.data, &mut rng)?,
             }
             self.data.qvel_mut().fill(0.0);
-            self.data.ctrl_mut().fill(0.0);
-            self.data.forward()?;
-            // robosuite re-creates the controller at reset: goal = current pose, posture = current arm qpos.
-            self.osc = OscPose::new(self.ids.clone(), &self.data);
-            self.gripper = GripperRamp::default();
+            self.restart_control()?;
             if let World::Task(..) = self.world {
-                for _ in 0..self.cfg.settle_steps {
-                    self.step_physics(&self.cfg.settle_action.clone())?;
-                }
+                self.settle_physics()?;
                 if let Some(p) = self.start_problem() {
                     last_problem = p;
                     continue;
                 }
             }
-            self.steps = 0;
-            // The tracker starts on the settled state (LIBERO-Mem counts from there).
-            if let World::Task(_, Some(t)) = &mut self.world {
-                t.reset();
-            }
-            self.track_goal();
-            return self.observe();
+            return self.start_episode();
         }
         Err(EnvError::Config(format!(
             "no valid initial state after {ATTEMPTS} draws from seed {seed}: {last_problem}"
@@ -415,24 +403,39 @@ impl Env {
         }
         self.data.qpos_mut().copy_from_slice(qpos);
         self.data.qvel_mut().copy_from_slice(qvel);
-        self.data.ctrl_mut().fill(0.0);
-        self.data.forward()?;
-        self.osc = OscPose::new(self.ids.clone(), &self.data);
-        self.gripper = GripperRamp::default();
-        self.steps = 0;
-        if let World::Task(_, Some(t)) = &mut self.world {
-            t.reset();
-        }
-        self.track_goal();
-        self.observe()
+        self.restart_control()?;
+        self.start_episode()
     }
 
     /// Runs the configured settle steps (`settle_steps` × `settle_action`, not counted as policy
     /// steps) and restarts the goal tracker on the settled state, as [`Env::reset`] does.
     pub fn settle(&mut self) -> Result<Observation, EnvError> {
+        self.settle_physics()?;
+        self.start_episode()
+    }
+
+    /// Zero controls, forward, and restart the controller as robosuite re-creates it at reset: goal =
+    /// current pose, posture = current arm qpos, gripper command at rest.
+    fn restart_control(&mut self) -> Result<(), EnvError> {
+        self.data.ctrl_mut().fill(0.0);
+        self.data.forward()?;
+        self.osc = OscPose::new(self.ids.clone(), &self.data);
+        self.gripper = GripperRamp::default();
+        Ok(())
+    }
+
+    /// `settle_steps` control steps of `settle_action`.
+    fn settle_physics(&mut self) -> Result<(), EnvError> {
+        let action = self.cfg.settle_action;
         for _ in 0..self.cfg.settle_steps {
-            self.step_physics(&self.cfg.settle_action.clone())?;
+            self.step_physics(&action)?;
         }
+        Ok(())
+    }
+
+    /// Step counter to 0 and the goal tracker restarted on the current state (LIBERO-Mem counts from the
+    /// settled start), then the first observation.
+    fn start_episode(&mut self) -> Result<Observation, EnvError> {
         self.steps = 0;
         if let World::Task(_, Some(t)) = &mut self.world {
             t.reset();

@@ -13,7 +13,7 @@
 //! keeps a held object away long enough ([`Op::WaitNonlive`]) and holds a placed state until the tracker
 //! appends it ([`Op::WaitSatisfied`]); once complete it releases and retreats without disturbing the scene.
 
-use nalgebra::Matrix3;
+use nalgebra::{Matrix3, Vector3};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
@@ -440,15 +440,7 @@ impl Expert {
                     self.att = hold.then_some(goal);
                     return None;
                 }
-                let mut a = still(grip);
-                for k in 0..3 {
-                    a[3 + k] = (err[k] * 2.5).clamp(-1.0, 1.0) as f32;
-                }
-                let e = sub(start, eef);
-                for k in 0..3 {
-                    a[k] = (e[k] * 15.0).clamp(-1.0, 1.0) as f32;
-                }
-                Some(a)
+                Some(rotate_in_place(err, start, eef, grip))
             }
             Op::Yaw { yaw, grip, max } => {
                 let r0 = self.init_rot.unwrap_or_else(Matrix3::identity);
@@ -461,16 +453,7 @@ impl Expert {
                     self.att = None;
                     return None;
                 }
-                let mut a = still(grip);
-                for k in 0..3 {
-                    a[3 + k] = (err[k] * 2.5).clamp(-1.0, 1.0) as f32;
-                }
-                // Keep the grip site where it was.
-                let e = sub(start, eef);
-                for k in 0..3 {
-                    a[k] = (e[k] * 15.0).clamp(-1.0, 1.0) as f32;
-                }
-                Some(a)
+                Some(rotate_in_place(err, start, eef, grip))
             }
             Op::Grip { cmd, steps } => (self.op_steps < steps).then_some(still(cmd)),
             Op::Hold { steps, grip } => (self.op_steps < steps).then_some(still(grip)),
@@ -607,6 +590,20 @@ pub fn run_episode_in(
 fn short(op: &Op) -> String {
     let s = format!("{op:?}");
     s.chars().take(90).collect()
+}
+
+/// Turns the hand by the orientation error `err` while holding the grip site at `start` (it is at
+/// `eef` now), gripper at `grip`.
+fn rotate_in_place(err: Vector3<f64>, start: [f64; 3], eef: [f64; 3], grip: f32) -> [f32; 7] {
+    let mut a = [0.0, 0.0, 0.0, 0.0, 0.0, 0.0, grip];
+    for k in 0..3 {
+        a[3 + k] = (err[k] * 2.5).clamp(-1.0, 1.0) as f32;
+    }
+    let e = sub(start, eef);
+    for k in 0..3 {
+        a[k] = (e[k] * 15.0).clamp(-1.0, 1.0) as f32;
+    }
+    a
 }
 
 fn clip(a: [f32; 7]) -> [f32; 7] {
