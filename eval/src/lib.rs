@@ -67,6 +67,9 @@ pub enum EvalError {
         /// What is wrong.
         message: String,
     },
+    /// Writing an output file failed.
+    #[error(transparent)]
+    Data(#[from] data::DataError),
     /// Writing a rollout recording or a visualisation failed.
     #[error("{}: {message}", path.display())]
     Output {
@@ -197,26 +200,20 @@ pub fn run_episode(
         Some(states) => {
             let (nq, nv) = (env.model().nq(), env.model().nv());
             let st = states
-                .state(k, nq, nv)
-                .map_err(|e| EvalError::Argument(e.to_string()))?
-                .ok_or_else(|| {
-                    EvalError::Argument(format!(
-                        "episode {k}: {} holds only {} init states",
-                        states.source, states.rows
-                    ))
-                })?;
+                .require(k, nq, nv)
+                .map_err(|e| EvalError::Argument(e.to_string()))?;
             env.reset_to_init(seed, st.qpos, st.qvel)?;
             env.settle()?
         }
     };
+    let record_err = |path: &Path, e: sim::record::RecordError| EvalError::Output {
+        path: path.to_path_buf(),
+        message: e.to_string(),
+    };
     let mut recorder = match &out.record {
         Some(path) => Some(
-            Recorder::create(path, env, task, seed, data::WriterOptions::default()).map_err(
-                |e| EvalError::Output {
-                    path: path.clone(),
-                    message: e.to_string(),
-                },
-            )?,
+            Recorder::create(path, env, task, seed, data::WriterOptions::default())
+                .map_err(|e| record_err(path, e))?,
         ),
         None => None,
     };
@@ -225,8 +222,8 @@ pub fn run_episode(
         None => None,
     };
     let mut steps = 0;
-    let mut g = goal(&obs)?.clone();
     while steps < task.max_steps {
+        let g = goal(&obs)?;
         if !cfg.full_budget && g.satisfied >= g.goal_len {
             break;
         }
@@ -237,21 +234,15 @@ pub fn run_episode(
         let next = env.step(&a)?;
         if let (Some(rec), Some(path)) = (recorder.as_mut(), out.record.as_ref()) {
             rec.record(env, &obs, a, &next)
-                .map_err(|e| EvalError::Output {
-                    path: path.clone(),
-                    message: e.to_string(),
-                })?;
+                .map_err(|e| record_err(path, e))?;
         }
         obs = next;
         steps += 1;
-        g = goal(&obs)?.clone();
     }
     if let (Some(rec), Some(path)) = (recorder, out.record.as_ref()) {
-        rec.finish().map_err(|e| EvalError::Output {
-            path: path.clone(),
-            message: e.to_string(),
-        })?;
+        rec.finish().map_err(|e| record_err(path, e))?;
     }
+    let g = goal(&obs)?;
     let success = if cfg.full_budget {
         g.done && !g.failed
     } else {
@@ -464,23 +455,13 @@ pub fn resolve_tasks(spec: &str, repeat: Option<usize>) -> Result<Vec<TaskSpec>,
     Ok(out)
 }
 
-/// Writes `bytes` to `path` through a temporary file in the same folder and a rename, so a reader
-/// never sees a half-written file.
+/// Writes `bytes` to `path` atomically (`data::index::write_atomic`: a synced temporary file in the
+/// same folder, renamed), creating the folder first, so a reader never sees a half-written file.
 pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), EvalError> {
-    let err = |e: std::io::Error| EvalError::Output {
-        path: path.to_path_buf(),
-        message: e.to_string(),
-    };
-    let dir = path.parent().filter(|p| !p.as_os_str().is_empty());
-    let dir = dir.unwrap_or(Path::new("."));
-    std::fs::create_dir_all(dir).map_err(err)?;
-    let tmp = dir.join(format!(
-        ".{}.tmp",
-        path.file_name()
-            .map_or("out".into(), |n| n.to_string_lossy())
-    ));
-    std::fs::write(&tmp, bytes).map_err(err)?;
-    std::fs::rename(&tmp, path).map_err(err)
+    if let Some(dir) = path.parent().filter(|p| !p.as_os_str().is_empty()) {
+        std::fs::create_dir_all(dir).map_err(|e| data::DataError::io(dir, e))?;
+    }
+    Ok(data::index::write_atomic(path, bytes)?)
 }
 
 #[cfg(test)]

@@ -152,14 +152,28 @@ pub fn short(task: &str) -> &str {
     task.split_once('/').map_or(task, |(_, t)| t)
 }
 
-/// Rows grouped by suite, in first-seen order.
-fn suites(rows: &[TaskSummary]) -> Vec<(String, Vec<&TaskSummary>)> {
-    let mut out: Vec<(String, Vec<&TaskSummary>)> = Vec::new();
-    for r in rows {
-        let s = suite(&r.task).to_string();
+/// Items grouped by the suite of their task id (`task` reads it), groups and items in first-seen order.
+fn by_suite<'a, T>(
+    items: impl IntoIterator<Item = &'a T>,
+    task: impl Fn(&T) -> &str,
+) -> Vec<(String, Vec<&'a T>)> {
+    let mut out: Vec<(String, Vec<&'a T>)> = Vec::new();
+    for item in items {
+        let s = suite(task(item)).to_string();
         match out.iter_mut().find(|(name, _)| *name == s) {
-            Some((_, v)) => v.push(r),
-            None => out.push((s, vec![r])),
+            Some((_, v)) => v.push(item),
+            None => out.push((s, vec![item])),
+        }
+    }
+    out
+}
+
+/// Distinct strings in first-seen order.
+fn first_seen<'a>(items: impl IntoIterator<Item = &'a str>) -> Vec<&'a str> {
+    let mut out: Vec<&str> = Vec::new();
+    for s in items {
+        if !out.contains(&s) {
+            out.push(s);
         }
     }
     out
@@ -200,7 +214,7 @@ pub fn markdown(rows: &[TaskSummary]) -> String {
             v.iter().map(|r| r.over_repetition).sum::<usize>()
         )
     };
-    let groups = suites(rows);
+    let groups = by_suite(rows, |r| &r.task);
     for (name, v) in &groups {
         if v.len() > 1 {
             let label = if name.is_empty() {
@@ -242,14 +256,16 @@ pub fn csv(rows: &[TaskSummary]) -> String {
 /// Several runs side by side, paper style: one table of subgoal completion (Table 3) and one of
 /// success (Table 2), a column per run, a row per task, suite averages over the tasks every run has.
 pub fn compare(runs: &[(String, Results)]) -> String {
-    let mut tasks: Vec<String> = Vec::new();
-    for (_, r) in runs {
-        for t in &r.tasks {
-            if !tasks.contains(&t.task) {
-                tasks.push(t.task.clone());
-            }
-        }
-    }
+    let tasks = first_seen(
+        runs.iter()
+            .flat_map(|(_, r)| r.tasks.iter().map(|t| t.task.as_str())),
+    );
+    // Suites with more than one task get an average over the tasks every run has.
+    let averaged: Vec<(String, Vec<&str>)> = by_suite(&tasks, |t| t)
+        .into_iter()
+        .filter(|(_, v)| v.len() > 1)
+        .map(|(name, v)| (name, v.into_iter().copied().collect()))
+        .collect();
     let lookup: Vec<BTreeMap<&str, &TaskSummary>> = runs
         .iter()
         .map(|(_, r)| r.tasks.iter().map(|t| (t.task.as_str(), t)).collect())
@@ -272,25 +288,18 @@ pub fn compare(runs: &[(String, Results)]) -> String {
         for t in &tasks {
             out.push_str(&format!("| {} |", short(t)));
             for l in &lookup {
-                match l.get(t.as_str()) {
+                match l.get(t) {
                     Some(s) => out.push_str(&format!(" {:.1} |", field(s))),
                     None => out.push_str(" – |"),
                 }
             }
             out.push('\n');
         }
-        let mut by_suite: Vec<(String, Vec<&String>)> = Vec::new();
-        for t in &tasks {
-            let s = suite(t).to_string();
-            match by_suite.iter_mut().find(|(n, _)| *n == s) {
-                Some((_, v)) => v.push(t),
-                None => by_suite.push((s, vec![t])),
-            }
-        }
-        for (name, ts) in by_suite.iter().filter(|(_, v)| v.len() > 1) {
-            let common: Vec<&&String> = ts
+        for (name, ts) in &averaged {
+            let common: Vec<&str> = ts
                 .iter()
-                .filter(|t| lookup.iter().all(|l| l.contains_key(t.as_str())))
+                .copied()
+                .filter(|t| lookup.iter().all(|l| l.contains_key(t)))
                 .collect();
             if common.is_empty() {
                 continue;
@@ -299,7 +308,7 @@ pub fn compare(runs: &[(String, Results)]) -> String {
             for l in &lookup {
                 out.push_str(&format!(
                     " {:.1} |",
-                    mean(common.iter().map(|t| field(l[t.as_str()])))
+                    mean(common.iter().map(|t| field(l[t])))
                 ));
             }
             out.push('\n');
@@ -325,12 +334,7 @@ pub fn scaling_table(rows: &[ScalingRow]) -> String {
     let mut ns: Vec<usize> = rows.iter().map(|r| r.repeats).collect();
     ns.sort_unstable();
     ns.dedup();
-    let mut tasks: Vec<&str> = Vec::new();
-    for r in rows {
-        if !tasks.contains(&r.task.as_str()) {
-            tasks.push(&r.task);
-        }
-    }
+    let tasks = first_seen(rows.iter().map(|r| r.task.as_str()));
     let mut s = String::from("Subgoal completion % (success %) against repetitions N\n\n| task |");
     for n in &ns {
         s.push_str(&format!(" N = {n} |"));

@@ -229,6 +229,11 @@ fn render_start(
 ) -> anyhow::Result<sim::render::Frame> {
     let mut env = env.map_err(classify)?;
     env.reset(seed).map_err(classify)?;
+    render_now(&mut env, camera, size)
+}
+
+/// Renders `camera` at `size`² from the env's current state.
+fn render_now(env: &mut Env, camera: &str, size: usize) -> anyhow::Result<sim::render::Frame> {
     let (r, data) = env.renderer_mut().context("rendering is off")?;
     r.render_named(data, camera, size, Channels::RGB)
         .map_err(|e| classify(e.into()))
@@ -251,19 +256,11 @@ fn render_init(
     let mut env = Env::from_task_with_assets(task, cfg, assets).map_err(classify)?;
     let (nq, nv) = (env.model().nq(), env.model().nv());
     let state = states
-        .state(k, nq, nv)
-        .map_err(|e| BadInput(e.to_string()))?
-        .ok_or_else(|| {
-            BadInput(format!(
-                "--init {k}: {} holds {} states",
-                states.source, states.rows
-            ))
-        })?;
+        .require(k, nq, nv)
+        .map_err(|e| BadInput(e.to_string()))?;
     env.reset_to_init(seed, state.qpos, state.qvel)
         .map_err(classify)?;
-    let (r, data) = env.renderer_mut().context("rendering is off")?;
-    r.render_named(data, camera, size, Channels::RGB)
-        .map_err(|e| classify(e.into()))
+    render_now(&mut env, camera, size)
 }
 
 fn check_out_dir(out: &std::path::Path) -> anyhow::Result<()> {

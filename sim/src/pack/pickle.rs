@@ -31,6 +31,16 @@ pub enum InitError {
         /// What is wrong.
         message: String,
     },
+    /// Asked for a state past the end of the file.
+    #[error("{path}: init state {k} asked for, the file holds {rows}")]
+    Missing {
+        /// The file.
+        path: String,
+        /// The state asked for.
+        k: usize,
+        /// States in the file.
+        rows: usize,
+    },
     /// The rows do not fit the model.
     #[error(
         "{path}: init states have {width} columns (1 + nq + nv), but this model needs {expected} (nq {nq}, nv {nv}); is it the init file of another task?"
@@ -104,6 +114,15 @@ impl InitStates {
             width,
             data,
             source: name,
+        })
+    }
+
+    /// [`InitStates::state`], with a missing state as [`InitError::Missing`].
+    pub fn require(&self, k: usize, nq: usize, nv: usize) -> Result<InitState<'_>, InitError> {
+        self.state(k, nq, nv)?.ok_or_else(|| InitError::Missing {
+            path: self.source.clone(),
+            k,
+            rows: self.rows,
         })
     }
 
@@ -568,6 +587,11 @@ mod tests {
         let st = s.state(1, 2, 2).unwrap().unwrap();
         assert_eq!((st.qpos.len(), st.qvel.len()), (2, 2));
         assert!(s.state(2, 2, 2).unwrap().is_none());
+        let e = s.require(2, 2, 2).unwrap_err().to_string();
+        assert!(
+            e.contains("init state 2 asked for, the file holds 2"),
+            "{e}"
+        );
         let e = s.state(0, 41, 37).unwrap_err().to_string();
         assert!(e.contains("5 columns") && e.contains("needs 79"), "{e}");
     }
