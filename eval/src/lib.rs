@@ -105,6 +105,9 @@ pub struct EvalConfig {
     pub full_budget: bool,
     /// Camera image side when the policy needs images (the side `sim generate` records).
     pub image_size: usize,
+    /// Rendering quality: the fast dataset defaults, or `RenderQuality::high()` (LIBERO's look,
+    /// for policies trained on LIBERO's own images).
+    pub quality: sim::render::RenderQuality,
     /// Worker threads, one simulator and one policy each.
     pub workers: usize,
     /// Record every rollout as an mcap episode under this directory (`<task>/episode_<k>.mcap`).
@@ -121,6 +124,15 @@ pub struct EvalConfig {
     pub assets: sim::pack::AssetPack,
 }
 
+/// Whether episodes of `task` follow LIBERO's protocol (init state k, idle steps): asked for with
+/// [`EvalConfig::libero_init`], or implied by a LIBERO task on LIBERO's assets (libero.md §6).
+pub fn libero_protocol(task: &TaskSpec, cfg: &EvalConfig) -> bool {
+    cfg.libero_init
+        || task.suite.pack_only()
+        || (cfg.assets == sim::pack::AssetPack::Libero
+            && task.suite == sim::task::Suite::LiberoGoal)
+}
+
 /// Idle steps after an init state under [`EvalConfig::libero_init`] (OpenVLA's `num_steps_wait`).
 pub const LIBERO_IDLE_STEPS: usize = 10;
 
@@ -131,6 +143,7 @@ impl Default for EvalConfig {
             seed: 0,
             full_budget: false,
             image_size: 128,
+            quality: sim::render::RenderQuality::default(),
             workers: 1,
             record: None,
             viz: None,
@@ -269,7 +282,8 @@ pub fn env_for(task: &TaskSpec, policy: &dyn Policy, cfg: &EvalConfig) -> Result
             render: policy.needs_images() || record,
             segmentation: record,
             image_size: cfg.image_size,
-            settle_steps: if cfg.libero_init {
+            quality: cfg.quality,
+            settle_steps: if libero_protocol(task, cfg) {
                 LIBERO_IDLE_STEPS
             } else {
                 EnvConfig::default().settle_steps
@@ -330,7 +344,7 @@ pub fn evaluate(
     let mut rows = Vec::new();
     let mut all = Vec::new();
     for (ti, task) in tasks.iter().enumerate() {
-        let init = if cfg.libero_init {
+        let init = if libero_protocol(task, cfg) {
             let pack = sim::pack::LiberoPack::locate_default()
                 .map_err(|e| EvalError::Argument(e.to_string()))?;
             Some(
@@ -436,6 +450,16 @@ pub fn resolve_tasks(spec: &str, repeat: Option<usize>) -> Result<Vec<TaskSpec>,
             "all" => {
                 for t in sim::task::list() {
                     push(t)?;
+                }
+            }
+            "libero_spatial" | "libero_object" | "libero_10" | "libero_90" => {
+                let pack = sim::pack::LiberoPack::locate_default()
+                    .map_err(|e| EvalError::Argument(e.to_string()))?;
+                for t in sim::pack::libero_tasks(&pack)?
+                    .into_iter()
+                    .filter(|t| t.suite == part)
+                {
+                    push(sim::task::resolve(&t.id)?)?;
                 }
             }
             "libero_mem" | "libero_goal" => {

@@ -74,8 +74,10 @@ struct EvalArgs {
     /// Policy: `model` (default with --run) or a sanity policy without a checkpoint.
     #[arg(long, value_enum)]
     policy: Option<PolicyKind>,
-    /// Tasks: comma-separated ids (`t1,t3,libero_goal/turn_on_the_stove`) or `libero_mem`,
-    /// `libero_goal`, `all` [default: the run's `[eval].tasks`, else libero_mem].
+    /// Tasks: comma-separated ids (`t1,t3,libero_goal/turn_on_the_stove`,
+    /// `libero_90/<file_stem>`) or suites `libero_mem`, `libero_goal`, `all` (the 20 shipped), and,
+    /// with the LIBERO pack, `libero_spatial`, `libero_object`, `libero_10`, `libero_90`
+    /// [default: the run's `[eval].tasks`, else libero_mem].
     #[arg(long)]
     tasks: Option<String>,
     /// Episodes per task.
@@ -96,6 +98,10 @@ struct EvalArgs {
     /// Camera image side rendered for the model (as recorded by `sim generate`).
     #[arg(long, default_value_t = 128)]
     image_size: usize,
+    /// Rendering quality: `fast` (the dataset default) or `libero` (MuJoCo's defaults as robosuite
+    /// renders: LIBERO's look, for policies trained on LIBERO's images).
+    #[arg(long, default_value = "fast", value_parser = ["fast", "libero", "high"])]
+    quality: String,
     /// Folder for results.md, results.json and results.csv [default: RUN/eval, else `results`].
     #[arg(long)]
     out: Option<PathBuf>,
@@ -109,11 +115,12 @@ struct EvalArgs {
     #[arg(long, default_value_t = 4)]
     viz_every: usize,
     /// LIBERO's protocol for LIBERO tasks: episode k starts from the task's init state k (needs the
-    /// LIBERO pack: `sim assets install libero`), then 10 idle steps.
+    /// LIBERO pack: `sim assets install libero`), then 10 idle steps. Implied for LIBERO tasks with
+    /// `--assets libero` and for the pack-only suites.
     #[arg(long)]
     libero_init: bool,
-    /// Asset pack of the scenes: builtin (primitives) or libero (LIBERO's meshes; needs
-    /// `sim assets install libero`).
+    /// Asset pack of the scenes: builtin (primitives) or libero (LIBERO's arenas, meshes and
+    /// robot look; needs `sim assets install libero`). The pack-only suites always use libero.
     #[arg(long, default_value = "builtin")]
     assets: String,
     /// No progress bar.
@@ -222,6 +229,11 @@ fn run_tasks(
         seed: args.seed,
         full_budget: args.full_budget,
         image_size: args.image_size,
+        quality: if args.quality == "fast" {
+            sim::render::RenderQuality::default()
+        } else {
+            sim::render::RenderQuality::high()
+        },
         workers: args.workers,
         record: args.record.clone(),
         viz,

@@ -44,6 +44,12 @@ pub enum Articulation {
     CabinetDrawer,
     /// FlatStove knob: on iff q ≥ 0.5, off iff q < 0.
     StoveKnob,
+    /// Microwave door hinge: open iff q < −1.3, closed iff q > −0.005.
+    MicrowaveDoor,
+    /// ShortCabinet drawers: open iff q > 0.10, closed iff q < 0.
+    ShortCabinetDrawer,
+    /// ShortFridge door hinge: open iff q > 2.0, closed iff q < 0.
+    FridgeDoor,
 }
 
 impl Articulation {
@@ -52,6 +58,9 @@ impl Articulation {
         match self {
             Articulation::CabinetDrawer => q < -0.14,
             Articulation::StoveKnob => q >= 0.5,
+            Articulation::MicrowaveDoor => q < -1.3,
+            Articulation::ShortCabinetDrawer => q > 0.10,
+            Articulation::FridgeDoor => q > 2.0,
         }
     }
 
@@ -60,6 +69,8 @@ impl Articulation {
         match self {
             Articulation::CabinetDrawer => q > 0.0,
             Articulation::StoveKnob => q < 0.0,
+            Articulation::MicrowaveDoor => q > -0.005,
+            Articulation::ShortCabinetDrawer | Articulation::FridgeDoor => q < 0.0,
         }
     }
 
@@ -78,6 +89,9 @@ impl Articulation {
         match self {
             Articulation::CabinetDrawer => [-0.16, -0.14],
             Articulation::StoveKnob => [0.5, 2.1],
+            Articulation::MicrowaveDoor => [-2.094, -1.3],
+            Articulation::ShortCabinetDrawer => [0.10, 0.16],
+            Articulation::FridgeDoor => [2.0, 2.7],
         }
     }
 
@@ -86,6 +100,22 @@ impl Articulation {
         match self {
             Articulation::CabinetDrawer => [0.0, 0.005],
             Articulation::StoveKnob => [-0.005, 0.0],
+            Articulation::MicrowaveDoor => [-0.005, 0.0],
+            Articulation::ShortCabinetDrawer | Articulation::FridgeDoor => [-0.005, 0.0],
+        }
+    }
+}
+
+impl Articulation {
+    /// The class LIBERO judges `category`'s internal joints by, if it is articulated.
+    pub fn of_category(category: &str) -> Option<Articulation> {
+        match category {
+            "wooden_cabinet" | "white_cabinet" => Some(Articulation::CabinetDrawer),
+            "flat_stove" => Some(Articulation::StoveKnob),
+            "microwave" => Some(Articulation::MicrowaveDoor),
+            "short_cabinet" => Some(Articulation::ShortCabinetDrawer),
+            "short_fridge" => Some(Articulation::FridgeDoor),
+            _ => None,
         }
     }
 }
@@ -253,8 +283,15 @@ pub fn categories() -> Vec<&'static str> {
     ASSETS.iter().map(|a| a.category).collect()
 }
 
-/// Workspace categories provided by the arena itself (`table` → `main_table`, `kitchen_table`).
-pub const WORKSPACE_CATEGORIES: &[&str] = &["table", "kitchen_table"];
+/// Workspace categories provided by the arena itself (`table` → `main_table`, `kitchen_table`, …).
+pub const WORKSPACE_CATEGORIES: &[&str] = &[
+    "table",
+    "kitchen_table",
+    "living_room_table",
+    "study_table",
+    "floor",
+    "coffee_table",
+];
 
 // --- geometry helpers -----------------------------------------------------------------------------
 

@@ -205,14 +205,22 @@ impl Env {
         Self::from_task_with_assets(task, cfg, crate::pack::AssetPack::Builtin)
     }
 
-    /// [`Env::from_task`] with the objects and fixtures from an asset pack: `Builtin` (the
-    /// primitives) or `Libero` (LIBERO's meshes and collision boxes from the installed pack, same names,
-    /// joints and region sites, so predicates, init states and the tracker work unchanged).
+    /// [`Env::from_task`] with the world from an asset pack: `Builtin` (the primitives) or `Libero`
+    /// (from the installed pack: LIBERO's arena, objects and fixtures with their meshes and collision
+    /// boxes under the same names, joints and region sites, and the Panda in robosuite's meshes, so
+    /// predicates, init states and the tracker work unchanged). Tasks of the pack-only suites always
+    /// use `Libero`.
     pub fn from_task_with_assets(
         task: &TaskSpec,
         cfg: EnvConfig,
         assets: crate::pack::AssetPack,
     ) -> Result<Env, EnvError> {
+        // The pack-only suites cannot be built from the builtin primitives.
+        let assets = if task.suite.pack_only() {
+            crate::pack::AssetPack::Libero
+        } else {
+            assets
+        };
         let pack = match assets {
             crate::pack::AssetPack::Builtin => None,
             crate::pack::AssetPack::Libero => Some(
@@ -378,9 +386,11 @@ impl Env {
 
     /// Resets to a stored state, as LIBERO's `set_init_state` after `reset()`: the fixtures are
     /// placed from `seed` (LIBERO re-draws them at every reset; init states do not hold them), then
-    /// `qpos` and `qvel` are written verbatim and the model is forwarded. The controller restarts at the
-    /// current pose and the gripper command at rest. No settling: call [`Env::settle`] for the
-    /// evaluators' idle steps. A state of another layout is an error naming both sizes.
+    /// `qpos` and `qvel` are written verbatim and the model is forwarded. As in robosuite, the
+    /// controller is the one made at the reset pose (before the state is written): its orientation
+    /// goal and nullspace posture stay those of the nominal start until a rotation is commanded
+    /// (libero.md §5.5), and the gripper command is at rest. No settling: call [`Env::settle`] for
+    /// the evaluators' idle steps. A state of another layout is an error naming both sizes.
     pub fn reset_to_init(
         &mut self,
         seed: u64,
@@ -399,11 +409,35 @@ impl Env {
         self.data.reset();
         self.place_robot(&mut rng);
         if let World::Task(scene, _) = &self.world {
-            scene.sample_init(&mut self.data, &mut rng)?;
+            scene.sample_fixtures(&mut self.data, &mut rng)?;
         }
+        self.restart_control()?;
         self.data.qpos_mut().copy_from_slice(qpos);
         self.data.qvel_mut().copy_from_slice(qvel);
-        self.restart_control()?;
+        self.data.forward()?;
+        self.start_episode()
+    }
+
+    /// Poses the fixture `name` (a welded instance) at `pos` with orientation `quat` (wxyz), forwards
+    /// and observes: to reproduce the fixture poses of a LIBERO run, which init states do not hold.
+    /// Call it after [`Env::reset_to_init`]; the episode (step count, goal tracker) restarts, the
+    /// controller is kept.
+    pub fn set_fixture_pose(
+        &mut self,
+        name: &str,
+        pos: [f64; 3],
+        quat: [f64; 4],
+    ) -> Result<Observation, EnvError> {
+        let scene = self
+            .scene()
+            .ok_or_else(|| EnvError::Config("this env has no task scene".into()))?;
+        let m = scene
+            .instance(name)
+            .and_then(|i| scene.instances[i].mocap)
+            .ok_or_else(|| EnvError::Config(format!("'{name}' is not a fixture of this scene")))?;
+        self.data.mocap_pos_mut()[3 * m..3 * m + 3].copy_from_slice(&pos);
+        self.data.mocap_quat_mut()[4 * m..4 * m + 4].copy_from_slice(&quat);
+        self.data.forward()?;
         self.start_episode()
     }
 

@@ -38,7 +38,8 @@ enum AssetsCmd {
 enum Quality {
     /// No shadows, no MSAA, no reflections (dataset default).
     Fast,
-    /// MuJoCo's defaults: shadows, 4× MSAA, reflections.
+    /// MuJoCo's defaults: shadows, 4× MSAA, reflections (LIBERO's look, as robosuite renders).
+    #[value(alias = "libero")]
     High,
 }
 

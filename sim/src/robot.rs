@@ -105,11 +105,11 @@ const SHAPES: [&[Capsule]; 7] = [
     &[([0.0, 0.0, -0.02], [0.0, 0.0, 0.07], 0.045)],
 ];
 
-fn v3(v: [f64; 3]) -> String {
+pub(crate) fn v3(v: [f64; 3]) -> String {
     format!("{} {} {}", v[0], v[1], v[2])
 }
 
-fn v4(v: [f64; 4]) -> String {
+pub(crate) fn v4(v: [f64; 4]) -> String {
     format!("{} {} {} {}", v[0], v[1], v[2], v[3])
 }
 
@@ -230,6 +230,25 @@ pub fn panda_xml(base_pos: [f64; 3]) -> PandaXml {
         body: b,
         actuators: a,
     }
+}
+
+/// [`panda_xml`] dressed in robosuite's visual meshes (LIBERO's look): the builtin shapes keep their
+/// collision role but move to group 3 (never drawn), and each
+/// body gets the visual geoms of `visuals` (`(body name, <geom> elements)`). Bodies, joints,
+/// inertials and actuators are unchanged, so the dynamics and the qpos layout are the builtin ones.
+pub fn panda_xml_dressed(base_pos: [f64; 3], visuals: &[(String, String)]) -> PandaXml {
+    let mut p = panda_xml(base_pos);
+    p.defaults = p.defaults.replace(r#"group="1""#, r#"group="3""#);
+    let mut body = p.body.replace(r#"group="1""#, r#"group="3""#);
+    for (name, geoms) in visuals {
+        let open = format!(r#"<body name="{name}""#);
+        if let Some(at) = body.find(&open) {
+            let end = at + body[at..].find('>').expect("an opening tag ends") + 1;
+            body.insert_str(end, &format!("\n{geoms}"));
+        }
+    }
+    p.body = body;
+    p
 }
 
 /// Indices of the Panda's joints, actuators, frames and cameras in a compiled model.

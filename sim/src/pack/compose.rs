@@ -324,6 +324,349 @@ impl LiberoObject {
     }
 }
 
+impl LiberoObject {
+    /// Internal joints of the `object` subtree (names without prefix), in document order.
+    pub fn joint_names(&self) -> Vec<String> {
+        fn walk(e: &Element, out: &mut Vec<String>) {
+            for c in &e.children {
+                match c.tag.as_str() {
+                    "joint" => out.extend(c.attr("name").map(str::to_string)),
+                    "body" => walk(c, out),
+                    _ => {}
+                }
+            }
+        }
+        let mut out = Vec::new();
+        walk(&self.body, &mut out);
+        out
+    }
+
+    /// Named box sites of the `object` subtree (names without prefix) with their half-sizes.
+    pub fn box_sites(&self) -> Vec<(String, [f64; 3])> {
+        fn walk(e: &Element, out: &mut Vec<(String, [f64; 3])>) {
+            for c in &e.children {
+                match c.tag.as_str() {
+                    "site" => {
+                        if let (Some(n), Some(h)) =
+                            (c.attr("name"), c.attr("size").and_then(parse_vec3))
+                        {
+                            out.push((n.to_string(), h));
+                        }
+                    }
+                    "body" => walk(c, out),
+                    _ => {}
+                }
+            }
+        }
+        let mut out = Vec::new();
+        walk(&self.body, &mut out);
+        out
+    }
+}
+
+/// The free-joint quaternion (wxyz slots, written verbatim as LIBERO's samplers do, libero.md §4.3)
+/// for a category's default placement rotation.
+fn placement_quat(category: &str) -> [f64; 4] {
+    let h = std::f64::consts::FRAC_1_SQRT_2;
+    match category {
+        // rotation (π/2, π/2) about "x"
+        "akita_black_bowl"
+        | "plate"
+        | "basket"
+        | "white_bowl"
+        | "bbq_sauce"
+        | "chefmate_8_frypan"
+        | "glazed_rim_porcelain_ramekin"
+        | "rack" => [h, 0.0, 0.0, h],
+        // dict {x: π/2, z: π/2}
+        "ketchup" | "salad_dressing" | "new_salad_dressing" | "milk" | "orange_juice" => {
+            [0.5, 0.5, 0.5, 0.5]
+        }
+        // (π/2, π/2) about "z"
+        "tomato_sauce" | "alphabet_soup" => [0.0, 0.0, h, h],
+        // (0, 0) about "x": the identity written into wxyz slots, a yaw of π
+        _ => [0.0, 0.0, 0.0, 1.0],
+    }
+}
+
+/// An [`AssetDef`](crate::assets::AssetDef) for a category the builtin library lacks, read from its
+/// LIBERO XML: placement metadata from the sibling sites, box sites as regions, internal joints with
+/// the class LIBERO judges them by (joints of unclassified categories are left out of the
+/// predicates). `movable` follows the task's listing (`:objects` or `:fixtures`). Definitions are
+/// made once per (category, movable) and kept for the process (a few dozen at most), so scenes can
+/// hold `&'static` references as they do for the builtin library.
+pub fn pack_asset_def(
+    pack: &LiberoPack,
+    category: &str,
+    movable: bool,
+) -> Result<&'static crate::assets::AssetDef, ComposeError> {
+    use crate::assets::{Articulation, AssetDef, AssetKind, SiteDef};
+    use std::sync::{Mutex, OnceLock};
+    type Cache = Mutex<HashMap<(String, bool), &'static AssetDef>>;
+    static CACHE: OnceLock<Cache> = OnceLock::new();
+    let cache = CACHE.get_or_init(Default::default);
+    let key = (category.to_string(), movable);
+    if let Some(d) = cache.lock().unwrap_or_else(|e| e.into_inner()).get(&key) {
+        return Ok(d);
+    }
+    let o = LiberoObject::load(pack, category)?;
+    let leak = |s: String| -> &'static str { Box::leak(s.into_boxed_str()) };
+    let sites: Vec<SiteDef> = o
+        .box_sites()
+        .into_iter()
+        .map(|(name, half)| SiteDef {
+            name: leak(name),
+            half,
+        })
+        .collect();
+    let joints: Vec<(&'static str, Articulation)> = match Articulation::of_category(category) {
+        Some(art) => o
+            .joint_names()
+            .into_iter()
+            .map(|j| (leak(j), art))
+            .collect(),
+        None => Vec::new(),
+    };
+    let def: &'static AssetDef = Box::leak(Box::new(AssetDef {
+        category: leak(category.to_string()),
+        kind: if movable {
+            AssetKind::Movable
+        } else {
+            AssetKind::Fixture
+        },
+        bottom_offset: o.placement.bottom_offset[2],
+        top_offset: o.placement.top_offset[2],
+        horizontal_radius: o.placement.horizontal_radius,
+        placement_quat: placement_quat(category),
+        sites: Box::leak(sites.into_boxed_slice()),
+        joints: Box::leak(joints.into_boxed_slice()),
+    }));
+    cache
+        .lock()
+        .unwrap_or_else(|e| e.into_inner())
+        .insert(key, def);
+    Ok(def)
+}
+
+/// robosuite's Panda, PandaGripper and RethinkMount visual meshes, ready to dress the builtin
+/// Panda's bodies (whose names, frames and joints are robosuite's): the `<asset>` children the visual
+/// geoms use, and the visual geoms (group 1, no collision, massless) of each body, by prefixed body
+/// name. Collision geoms are not taken: the builtin Panda keeps its own.
+#[derive(Debug, Clone, Default)]
+pub struct RobotVisuals {
+    /// `<asset>` children (meshes, materials, textures), names prefixed.
+    pub assets: String,
+    /// (body name, `<geom>` elements) in document order.
+    pub geoms: Vec<(String, String)>,
+}
+
+/// Reads robosuite's Panda (`robot0_`), its gripper (`gripper0_`) and the Rethink mount (`mount0_`)
+/// from the pack's robosuite wheel. Visual geoms of the mount's sub-bodies go to `mount0_base`,
+/// shifted by robosuite's mount offset (+0.01 m in z).
+pub fn robot_visuals(pack: &LiberoPack) -> Result<RobotVisuals, ComposeError> {
+    let root = pack.robosuite_assets();
+    let parts = [
+        ("robots/panda/robot.xml", "robot0", None),
+        ("grippers/panda_gripper.xml", "gripper0", None),
+        (
+            "mounts/rethink_mount.xml",
+            "mount0",
+            Some(("mount0_base", 0.01)),
+        ),
+    ];
+    let mut out = RobotVisuals::default();
+    for (rel, pfx, collapse) in parts {
+        let path = root.join(rel);
+        let xml_err = |message: String| ComposeError::Xml {
+            path: path.clone(),
+            message,
+        };
+        let text = std::fs::read_to_string(&path).map_err(|e| xml_err(e.to_string()))?;
+        let doc = roxmltree::Document::parse(&text).map_err(|e| xml_err(e.to_string()))?;
+        let doc_root = Element::from_node(doc.root_element());
+        let dir = path.parent().unwrap_or(Path::new(".")).to_path_buf();
+        let mut defaults = Defaults::new();
+        for d in doc_root.children.iter().filter(|c| c.tag == "default") {
+            collect_defaults(d, None, &mut defaults);
+        }
+        // Visual geoms by body.
+        let mut geoms: Vec<(String, Element)> = Vec::new();
+        fn walk(e: &Element, out: &mut Vec<(String, Element)>) {
+            for c in &e.children {
+                if c.tag != "body" {
+                    continue;
+                }
+                let name = c.attr("name").unwrap_or_default().to_string();
+                for g in c.children.iter().filter(|g| g.tag == "geom") {
+                    if g.attr("group") == Some("1") {
+                        out.push((name.clone(), g.clone()));
+                    }
+                }
+                walk(c, out);
+            }
+        }
+        for w in doc_root.children.iter().filter(|c| c.tag == "worldbody") {
+            walk(w, &mut geoms);
+        }
+        let used: Vec<String> = geoms
+            .iter()
+            .filter_map(|(_, g)| g.attr("mesh").map(str::to_string))
+            .collect();
+        for a in doc_root.children.iter().filter(|c| c.tag == "asset") {
+            for c in &a.children {
+                if c.tag == "mesh" && !used.iter().any(|u| Some(u.as_str()) == c.attr("name")) {
+                    continue; // collision meshes: not needed, and costly to compile
+                }
+                let mut c = c.clone();
+                if let Some(f) = c.attr("file") {
+                    let abs = dir.join(f);
+                    if !abs.exists() {
+                        return Err(xml_err(format!("{} `{f}` not found", c.tag)));
+                    }
+                    c.set("file", abs.display().to_string());
+                }
+                inline_defaults(&mut c, &defaults, None);
+                prefix(&mut c, pfx);
+                c.write(&mut out.assets, 1);
+            }
+        }
+        for (body, mut g) in geoms {
+            inline_defaults(&mut g, &defaults, None);
+            prefix(&mut g, pfx);
+            g.set("mass", "0".into());
+            g.set("contype", "0".into());
+            g.set("conaffinity", "0".into());
+            let body = match collapse {
+                Some((target, dz)) => {
+                    let p = g.attr("pos").and_then(parse_vec3).unwrap_or([0.0; 3]);
+                    g.set("pos", format!("{} {} {}", p[0], p[1], p[2] + dz));
+                    target.to_string()
+                }
+                None => format!("{pfx}_{body}"),
+            };
+            let mut s = String::new();
+            g.write(&mut s, 0);
+            match out.geoms.iter_mut().find(|(b, _)| *b == body) {
+                Some((_, acc)) => acc.push_str(&s),
+                None => out.geoms.push((body, s)),
+            }
+        }
+    }
+    Ok(out)
+}
+
+/// LIBERO's arena from the pack's scene XML: `<asset>` children and the `<worldbody>` children
+/// (floor, walls, decorations, lights, the scene's own furniture).
+#[derive(Debug, Clone, Default)]
+pub struct ArenaXml {
+    /// `<asset>` children.
+    pub assets: String,
+    /// `<worldbody>` children.
+    pub world: String,
+}
+
+/// Reads the scene XML of `arena` as LIBERO's problem class configures it (libero.md §4.1): floor and
+/// wall textures from the class's style, the scene's cameras left out (the composer places LIBERO's),
+/// the robosuite `table` body left out (the composer builds it as robosuite's `TableArena` does), the
+/// body named like the workspace renamed `<name>_arena` (the composer's workspace body carries the
+/// regions), and colliding geoms given the environment's collision bits.
+pub fn arena_xml(pack: &LiberoPack, arena: crate::scene::Arena) -> Result<ArenaXml, ComposeError> {
+    use crate::scene::Arena;
+    let (file, floor, wall) = match arena {
+        Arena::Tabletop => (
+            "libero_tabletop_base_style.xml",
+            "light-gray-floor-tile.png",
+            "light-gray-plaster.png",
+        ),
+        Arena::Kitchen => (
+            "libero_kitchen_tabletop_base_style.xml",
+            "gray_ceramic_tile.png",
+            "yellow_linen_wall_texture.png",
+        ),
+        Arena::LivingRoom => (
+            "libero_living_room_tabletop_base_style.xml",
+            "seamless_wood_planks_floor.png",
+            "light-gray-plaster.png",
+        ),
+        Arena::Study => (
+            "libero_study_base_style.xml",
+            "light-gray-floor-tile.png",
+            "light-gray-plaster.png",
+        ),
+        Arena::Floor => (
+            "libero_floor_base_style.xml",
+            "light-gray-floor-tile.png",
+            "light-gray-plaster.png",
+        ),
+        Arena::CoffeeTable => (
+            "libero_coffee_table_base_style.xml",
+            "seamless_wood_planks_floor.png",
+            "light-gray-plaster.png",
+        ),
+    };
+    let path = pack.assets_dir().join("scenes").join(file);
+    let xml_err = |message: String| ComposeError::Xml {
+        path: path.clone(),
+        message,
+    };
+    let text = std::fs::read_to_string(&path).map_err(|e| xml_err(e.to_string()))?;
+    let doc = roxmltree::Document::parse(&text).map_err(|e| xml_err(e.to_string()))?;
+    let root = Element::from_node(doc.root_element());
+    let dir = path.parent().unwrap_or(Path::new(".")).to_path_buf();
+    let textures = pack.assets_dir().join("textures");
+    let mut out = ArenaXml::default();
+    for a in root.children.iter().filter(|c| c.tag == "asset") {
+        for c in &a.children {
+            let mut c = c.clone();
+            let style = match (c.tag.as_str(), c.attr("name")) {
+                ("texture", Some("texplane")) => Some(floor),
+                ("texture", Some("tex-wall")) => Some(wall),
+                _ => None,
+            };
+            let file = match style {
+                Some(f) => Some(textures.join(f)),
+                None => c.attr("file").map(|f| dir.join(f)),
+            };
+            if let Some(abs) = file {
+                if !abs.exists() {
+                    return Err(xml_err(format!("{} `{}` not found", c.tag, abs.display())));
+                }
+                c.set("file", abs.display().to_string());
+            }
+            c.write(&mut out.assets, 1);
+        }
+    }
+    let ws = arena.workspace();
+    for w in root.children.iter().filter(|c| c.tag == "worldbody") {
+        for c in &w.children {
+            if c.tag == "camera" || (c.tag == "body" && c.attr("name") == Some("table")) {
+                continue;
+            }
+            let mut c = c.clone();
+            if c.tag == "body" && c.attr("name") == Some(ws) {
+                c.set("name", format!("{ws}_arena"));
+            }
+            arena_collision_bits(&mut c);
+            c.write(&mut out.world, 1);
+        }
+    }
+    Ok(out)
+}
+
+/// Gives colliding arena geoms the environment's collision bits.
+fn arena_collision_bits(e: &mut Element) {
+    if e.tag == "geom" {
+        let visual_only = e.attr("contype") == Some("0") && e.attr("conaffinity") == Some("0");
+        if !visual_only {
+            e.set("contype", crate::robot::ENV_CONTYPE.to_string());
+            e.set("conaffinity", crate::robot::ENV_CONAFFINITY.to_string());
+        }
+    }
+    for c in &mut e.children {
+        arena_collision_bits(c);
+    }
+}
+
 fn hide_site(e: &mut Element, name: &str) {
     for c in &mut e.children {
         if c.tag == "site" && c.attr("name") == Some(name) {
@@ -410,8 +753,7 @@ mod tests {
     /// MuJoCo 2.2.2 (two instances of each, one movable, one fixed).
     #[test]
     fn every_category_loads_in_mujoco() {
-        let Ok(pack) = LiberoPack::locate_default() else {
-            eprintln!("LIBERO pack not installed; skipping");
+        let Some(pack) = LiberoPack::for_tests() else {
             return;
         };
         let tasks = super::super::libero_tasks(&pack).unwrap();

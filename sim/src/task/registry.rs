@@ -29,6 +29,14 @@ pub enum Suite {
     LiberoMem,
     /// The 10 LIBERO-Goal tasks.
     LiberoGoal,
+    /// LIBERO-Spatial (from the LIBERO asset pack).
+    LiberoSpatial,
+    /// LIBERO-Object (from the LIBERO asset pack).
+    LiberoObject,
+    /// LIBERO-10 (LIBERO-Long; from the LIBERO asset pack).
+    Libero10,
+    /// LIBERO-90 (from the LIBERO asset pack).
+    Libero90,
     /// A BDDL file given by path.
     User,
 }
@@ -39,7 +47,46 @@ impl Suite {
         match self {
             Suite::LiberoMem => "libero_mem",
             Suite::LiberoGoal => "libero_goal",
+            Suite::LiberoSpatial => "libero_spatial",
+            Suite::LiberoObject => "libero_object",
+            Suite::Libero10 => "libero_10",
+            Suite::Libero90 => "libero_90",
             Suite::User => "user",
+        }
+    }
+}
+
+impl Suite {
+    /// The LIBERO suite of a folder name (`libero_spatial`, …); `None` for others.
+    pub fn libero(name: &str) -> Option<Suite> {
+        match name {
+            "libero_goal" => Some(Suite::LiberoGoal),
+            "libero_spatial" => Some(Suite::LiberoSpatial),
+            "libero_object" => Some(Suite::LiberoObject),
+            "libero_10" => Some(Suite::Libero10),
+            "libero_90" => Some(Suite::Libero90),
+            _ => None,
+        }
+    }
+
+    /// Whether the suite's tasks only exist in LIBERO's asset pack (spatial, object, 10, 90): they
+    /// always build from the pack.
+    pub fn pack_only(self) -> bool {
+        matches!(
+            self,
+            Suite::LiberoSpatial | Suite::LiberoObject | Suite::Libero10 | Suite::Libero90
+        )
+    }
+
+    /// OpenVLA's step budget for a LIBERO suite (`run_libero_eval.py`, libero.md §6): spatial 220,
+    /// object 280, goal 300, libero_10 520, libero_90 400.
+    pub fn libero_budget(self) -> usize {
+        match self {
+            Suite::LiberoSpatial => 220,
+            Suite::LiberoObject => 280,
+            Suite::Libero10 => 520,
+            Suite::Libero90 => 400,
+            _ => 300,
         }
     }
 }
@@ -111,6 +158,14 @@ pub enum TaskError {
     /// A BDDL syntax or structure error (`file:line:col: message`).
     #[error(transparent)]
     Bddl(#[from] BddlError),
+    /// A task of LIBERO's pack was asked for, but the pack is not usable.
+    #[error("task `{id}`: {message}")]
+    Pack {
+        /// The task.
+        id: String,
+        /// Why (names the install command when the pack is missing).
+        message: String,
+    },
     /// A repetition count that cannot be used.
     #[error("task `{id}`: {message}")]
     BadRepeat {
@@ -398,6 +453,12 @@ pub fn resolve(id_or_path: &str) -> Result<TaskSpec, TaskError> {
     if s.ends_with(".bddl") || Path::new(s).is_file() {
         return load_user(s);
     }
+    if let Some((suite, stem)) = s.split_once('/')
+        && let Some(suite) = Suite::libero(suite)
+        && suite != Suite::LiberoGoal
+    {
+        return load_pack_task(suite, stem, s);
+    }
     Err(TaskError::UnknownTask {
         id: s.to_string(),
         known: known_ids(),
@@ -431,6 +492,50 @@ fn with_repeats(t: &Shipped, asked: &str, n: usize) -> Result<TaskSpec, TaskErro
         });
     }
     Ok(t.repeated(n))
+}
+
+/// A task of LIBERO's pack (`libero_spatial/<stem>`, …): its BDDL from the installed pack, LIBERO's
+/// plain `And` goal, OpenVLA's step budget for the suite.
+fn load_pack_task(suite: Suite, stem: &str, asked: &str) -> Result<TaskSpec, TaskError> {
+    let pack = crate::pack::LiberoPack::locate_default().map_err(|e| TaskError::Pack {
+        id: asked.to_string(),
+        message: e.to_string(),
+    })?;
+    let path = pack
+        .bddl_dir()
+        .join(suite.as_str())
+        .join(format!("{stem}.bddl"));
+    if !path.is_file() {
+        return Err(TaskError::UnknownTask {
+            id: asked.to_string(),
+            known: known_ids(),
+        });
+    }
+    let text = std::fs::read_to_string(&path).map_err(|source| TaskError::Io {
+        path: path.display().to_string(),
+        source,
+    })?;
+    let problem = bddl::parse_named(&path.display().to_string(), &text)?;
+    let goal_len = GoalTracker::new(&problem)
+        .map_err(|source| TaskError::Goal {
+            id: asked.to_string(),
+            source,
+        })?
+        .goal_len();
+    let task_language = language_from_file_stem(stem);
+    Ok(TaskSpec {
+        id: format!("{}/{stem}", suite.as_str()),
+        suite,
+        name: stem.to_string(),
+        instruction: task_language.clone(),
+        task_language,
+        bddl_language: problem.language.clone(),
+        bddl_text: text,
+        problem,
+        max_steps: suite.libero_budget(),
+        goal_len,
+        repeats: None,
+    })
 }
 
 /// Loads a user's BDDL file.
