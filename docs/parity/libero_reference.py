@@ -1,10 +1,19 @@
 #!/usr/bin/env python
 """Reference outputs from Python LIBERO (hf-libero 0.1.4 + robosuite 1.4.0 + mujoco 2.3.7)
-for libero_goal/put_the_bowl_on_the_plate.
+for libero_goal/put_the_bowl_on_the_plate, compared by `sim/examples/libero_parity.rs`.
+A one-off measurement; the product never runs Python.
 
-Run with (see out/README.md):
-  LIBERO_CONFIG_PATH=/work/pyref MUJOCO_GL=egl PYOPENGL_PLATFORM=egl \
-      /work/pyref/venv/bin/python /work/pyref/libero_reference.py
+Set-up (a throwaway venv; versions.txt is its `pip freeze`):
+  python3 -m venv venv
+  venv/bin/pip install mujoco==2.3.7 robosuite==1.4.0 numpy==1.26.4 numba==0.60.0 scipy==1.13.1 \
+      opencv-python==4.10.0.84
+  venv/bin/pip install --no-deps hf-libero==0.1.4
+  venv/bin/pip install bddl==1.0.1 easydict pyyaml termcolor future "matplotlib<3.10" cloudpickle "gymnasium<1.0"
+  # hf-libero looks for its assets inside the package: link the pack's merged assets there
+  ln -s ~/.cache/libero-mem-rs/libero/assets venv/lib/python3.11/site-packages/libero/libero/assets
+  # a config.yaml in $LIBERO_CONFIG_PATH naming the package's bddl_files and init_files folders
+Run (writes ./out/; copy the *_upright.png and JSON files to docs/parity/):
+  LIBERO_CONFIG_PATH=. MUJOCO_GL=egl PYOPENGL_PLATFORM=egl venv/bin/python libero_reference.py
 """
 import json
 import os
