@@ -212,6 +212,30 @@ fn unknown_task_lists_the_known_ids() {
     );
 }
 
+/// A task of the pack-only suites without the pack: exit 2 and the one command that installs it.
+#[test]
+fn pack_task_without_the_pack_names_the_install_command() {
+    let empty = tmp("no-pack-cache");
+    std::fs::create_dir_all(&empty).unwrap();
+    let out = Command::new(env!("CARGO_BIN_EXE_sim"))
+        .args([
+            "render",
+            "--task",
+            "libero_10/LIVING_ROOM_SCENE2_put_both_the_alphabet_soup_and_the_tomato_sauce_in_the_basket",
+            "--out",
+            tmp("y.png").to_str().unwrap(),
+        ])
+        .env("LIBERO_MEM_CACHE", &empty)
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(2), "{err}");
+    assert!(
+        err.contains("not installed") && err.contains("sim -- assets install libero"),
+        "{err}"
+    );
+}
+
 #[test]
 fn bddl_syntax_error_names_file_line_and_column() {
     let bad = tmp("broken.bddl");

@@ -304,6 +304,42 @@ mod tests {
         assert!(e.contains("init states for"), "{e}");
     }
 
+    /// Pack tasks resolve with their suite, OpenVLA's budget and both languages; an unknown stem of
+    /// a pack suite names the suite and where to list the tasks.
+    #[test]
+    fn pack_tasks_resolve_with_suite_budget_and_language() {
+        if LiberoPack::for_tests().is_none() {
+            return;
+        }
+        let id = "libero_10/KITCHEN_SCENE3_turn_on_the_stove_and_put_the_moka_pot_on_it";
+        let t = crate::task::resolve(id).unwrap();
+        assert_eq!(t.id, id);
+        assert_eq!(t.suite, crate::task::Suite::Libero10);
+        assert_eq!(t.max_steps, 520);
+        assert_eq!(
+            t.instruction,
+            "turn on the stove and put the moka pot on it"
+        );
+        assert_eq!(t.goal_len, 1);
+        let budgets = ["libero_spatial", "libero_object", "libero_90"].map(|suite| {
+            let pack = LiberoPack::locate_default().unwrap();
+            let first = libero_tasks(&pack)
+                .unwrap()
+                .into_iter()
+                .find(|t| t.suite == suite)
+                .unwrap();
+            crate::task::resolve(&first.id).unwrap().max_steps
+        });
+        assert_eq!(budgets, [220, 280, 400]);
+        let e = crate::task::resolve("libero_10/no_such_task")
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("no task `no_such_task` in libero_10") && e.contains("sim assets tasks"),
+            "{e}"
+        );
+    }
+
     /// With the pack installed: every one of LIBERO's 130 tasks builds from the pack with the init
     /// files' qpos/qvel layout, loads init state 0 exactly, steps 10 zero actions without NaN and
     /// renders both cameras.

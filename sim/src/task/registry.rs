@@ -506,9 +506,12 @@ fn load_pack_task(suite: Suite, stem: &str, asked: &str) -> Result<TaskSpec, Tas
         .join(suite.as_str())
         .join(format!("{stem}.bddl"));
     if !path.is_file() {
-        return Err(TaskError::UnknownTask {
+        return Err(TaskError::Pack {
             id: asked.to_string(),
-            known: known_ids(),
+            message: format!(
+                "no task `{stem}` in {}; `sim assets tasks` lists the 130 LIBERO tasks",
+                suite.as_str()
+            ),
         });
     }
     let text = std::fs::read_to_string(&path).map_err(|source| TaskError::Io {
