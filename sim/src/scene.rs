@@ -212,8 +212,8 @@ impl Arena {
     /// LIBERO's fixture `z_offset` (0.01 − table thickness; −0.025 on the floor).
     fn fixture_z_offset(self) -> f64 {
         match self {
-            Arena::Tabletop | Arena::Kitchen | Arena::Study => 0.01 - 0.05,
-            Arena::LivingRoom | Arena::CoffeeTable => 0.01 - 0.024,
+            Arena::Tabletop | Arena::Kitchen | Arena::Study => -0.04,
+            Arena::LivingRoom | Arena::CoffeeTable => -0.014,
             Arena::Floor => -0.025,
         }
     }
