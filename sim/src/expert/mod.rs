@@ -62,7 +62,8 @@ pub enum Point {
         /// Whether `off` is expressed in the body frame.
         local: bool,
     },
-    /// A bowl's rim on its freer ±y side (decided on the live state): the body position plus
+    /// A bowl's rim on its freer ±y side (decided on the live state, and where given also on the
+    /// neighbourhood of the destination the hand will carry it to): the body position plus
     /// `(off.x, ±off.y, off.z)`; `coin` breaks ties.
     Rim {
         /// Instance.
@@ -71,6 +72,8 @@ pub enum Point {
         off: [f64; 3],
         /// Tie-break.
         coin: bool,
+        /// Where the bowl goes next (the side must be free there too).
+        dest: Option<[f64; 3]>,
     },
     /// A site position plus a world offset.
     Site {
@@ -145,6 +148,18 @@ pub enum Op {
         axis: [f64; 3],
         /// Tilt angle.
         tilt: f64,
+        /// Gripper command.
+        grip: f32,
+        /// Step limit.
+        max: usize,
+        /// Hold the orientation during later moves.
+        hold: bool,
+    },
+    /// Rotate the hand to `rot · R0` (R0 the initial orientation; `rot` row-major), keeping the grip site
+    /// in place; later moves hold that orientation while `hold` (until the next rotation op).
+    Attitude {
+        /// World rotation applied to the initial orientation, row-major.
+        rot: [f64; 9],
         /// Gripper command.
         grip: f32,
         /// Step limit.
@@ -411,6 +426,16 @@ impl Expert {
                     };
                     a[k] = ((g * e[k]).clamp(-1.0, 1.0) + n) as f32;
                 }
+                if until_pending
+                    && e[2] < -0.002
+                    && let Target::Carry { held, .. } = target
+                    && scene.instances[held].def.category == "wine_bottle"
+                    && plan::horizontal_reach(eef) > 0.74
+                {
+                    // Setting a bottle down far out: the stretched arm barely answers the small
+                    // proportional command near the surface; keep pressing down until it touches.
+                    a[2] = a[2].min(-0.2);
+                }
                 a[6] = grip;
                 if let Some(goal) = self.att {
                     let err = orientation_error(&goal, &quat_mat(obs.eef_quat));
@@ -435,6 +460,21 @@ impl Expert {
                 ));
                 let rt = nalgebra::Rotation3::from_axis_angle(&ax, tilt);
                 let goal = rt.into_inner() * rz.into_inner() * r0;
+                let err = orientation_error(&goal, &quat_mat(obs.eef_quat));
+                if err.norm() < 0.03 || self.op_steps >= max {
+                    self.att = hold.then_some(goal);
+                    return None;
+                }
+                Some(rotate_in_place(err, start, eef, grip))
+            }
+            Op::Attitude {
+                rot,
+                grip,
+                max,
+                hold,
+            } => {
+                let r0 = self.init_rot.unwrap_or_else(Matrix3::identity);
+                let goal = Matrix3::from_row_slice(&rot) * r0;
                 let err = orientation_error(&goal, &quat_mat(obs.eef_quat));
                 if err.norm() < 0.03 || self.op_steps >= max {
                     self.att = hold.then_some(goal);
@@ -492,7 +532,7 @@ impl Expert {
         match t {
             Target::Grip(p) => point(scene, env, p),
             Target::Carry { held, to } => {
-                let o = env.data().body_pos(scene.instances[*held].root_body);
+                let o = carry_ref(scene, env, *held);
                 let p = point(scene, env, to);
                 add(eef, sub(p, o))
             }
@@ -512,6 +552,19 @@ impl Expert {
     }
 }
 
+/// The held object's origin as the hand sees it: a bottle held by the neck swings about the grasp
+/// (a pendulum about the finger axis), so its origin is taken where it would be hanging straight below
+/// the neck (chasing the swinging origin would pump the swing).
+fn carry_ref(scene: &Scene, env: &Env, held: usize) -> [f64; 3] {
+    let b = scene.instances[held].root_body;
+    let p = env.data().body_pos(b);
+    if scene.instances[held].def.category != "wine_bottle" {
+        return p;
+    }
+    let c = [0.0, 0.0, plan::BOTTLE_NECK];
+    add(p, sub(qrot(env.data().body_quat(b), c), c))
+}
+
 /// A world point from a [`Point`] on the live state.
 pub fn point(scene: &Scene, env: &Env, p: &Point) -> [f64; 3] {
     match p {
@@ -527,9 +580,14 @@ pub fn point(scene: &Scene, env: &Env, p: &Point) -> [f64; 3] {
             add(pos, o)
         }
         Point::Site { site, off } => add(env.data().site_pos(*site), *off),
-        Point::Rim { inst, off, coin } => {
+        Point::Rim {
+            inst,
+            off,
+            coin,
+            dest,
+        } => {
             let pos = env.data().body_pos(scene.instances[*inst].root_body);
-            let side = plan::clear_side(scene, env, *inst, pos, off[1], *coin);
+            let side = plan::clear_side_both(scene, env, *inst, pos, *dest, off[1], *coin);
             add(pos, [off[0], side * off[1], off[2]])
         }
     }
