@@ -738,20 +738,31 @@ while let Some(action) = expert.act(&env, &obs) {             // None: demonstra
   metre, to a live target: a point on an object, or *carry* — the held object's origin to a destination),
   yaw, gripper open/close (10–12 steps, fully closed before lifting), hold, wait for the tracker.
 * **Grasps.** Bowl: pinch the rim wall on the ±y side whose neighbourhood is freer (the 20 cm hand box is
-  checked against tall objects and fixtures, decided on the live state; on a tie, the side that is free
-  at the destination); bowls beyond ~0.72 m from the shoulder, or under an open drawer, are pinched at
-  the near (−x) rim with the hand yawed 90°. Bottle: the neck (hand yawed 90° when the rack is beside
-  it). Cream cheese: across its 4.3 cm width. Basket: the wall facing ±y, then slid 1.5 cm above the
+  checked against tall objects and fixtures, decided on the live state, scored at the source and at
+  the destination; a side blocked at the source while the other is free is never taken); bowls beyond
+  ~0.72 m from the shoulder, or under an open drawer, are pinched at the near (−x) rim with the hand
+  yawed 90°. Bottle: the neck (hand yawed 90° when the rack is beside it); a neck pinch is a pivot, so
+  a carried bottle is steered by the point hanging straight below the neck, not by its swinging origin.
+  Cream cheese: across its 4.3 cm width. Basket: the wall facing ±y, then slid 1.5 cm above the
   table. Plate: its +y rim pinched, lifted 8 cm (over the cream cheese) and set down in the region
   where its footprint clears the objects already there.
 * **Articulated fixtures.** Drawers: the hand is yawed so the fingers close along the handle bar and
   tilted ~40° about the horizontal so it stays in front of the drawer above; it slides in around the
   bar's ends, pinches them and pulls 16 cm along the slide (moves hold that orientation). Stove: the
   fingers pinch the knob's pointer bar across its thickness and the wrist twists 0.75 rad.
+* **Wine rack.** The rack's `top_region` is a slab tilted 62.5°; the bottle lies along x in the trough
+  between the cradle plate and its lip, origin in the slab. The neck is taken from the side (hand
+  horizontal, pointing −y, fingers along x), the wrist rolls the bottle down to lie along x (fingers
+  now along z, so the pinch pivots about a vertical axis; it is carried rolled 20° short of level so
+  gravity keeps it pointing along x), above the trough the hand levels it and lowers it straight in
+  with the hand outside the rack's end frame.
 * **Reach.** A straight arm is a singularity the OSC cannot leave: far out the expert first pulls in
-  towards the shoulder before lifting and carries lower, pulls in again after releasing far out, aims
-  far object destinations 1.5 cm towards the shoulder (On allows 3 cm), puts an object back where it
-  was taken from with a short 4.5 cm lift instead, and sets things on the cabinet top on its near half.
+  towards the shoulder before lifting and carries lower (unless another bowl stands near the way),
+  comes down slower for far grasps, keeps pressing a far bottle down until it touches, pulls in again
+  after releasing far out, aims far object destinations 1.5 cm towards the shoulder (On allows 3 cm),
+  puts an object back where it was taken from with a short 4.5 cm lift instead, and sets things on the
+  cabinet top on its near half. After releasing beside the cabinet the hand rises over its top before
+  turning (a turning hand sweeps the drawer handles).
 * **Tracker timing.** The expert follows the tracker's debounce: it keeps a lifted object away until the
   pending atom has been false ≥ 17 steps since the last append, holds the placed state until the tracker
   appends it, and moves the same object on without releasing when the next subgoal is about it (the
@@ -766,16 +777,20 @@ while let Some(action) = expert.act(&env, &obs) {             // None: demonstra
 
 * `wooden_cabinet`: the drawer handles are 5 cm bars standing 2.5 cm proud of the drawer fronts on two
   posts (they stood 9 mm proud, too little for a fingertip; LIBERO's handles protrude similarly).
+* `wine_rack`: the cradle's lip stood at the upper edge of the tilted plate (site +y runs down the
+  slope), so nothing could rest in the cradle; it now stands 4 cm down the slope from the site, where
+  a lying bottle's origin stays within the region's ±0.022 across the slope.
 * `flat_stove`: the knob joint is a light part (0.1 kg, inertia 2·10⁻⁴ kg·m², damping 0.02, armature
   5·10⁻⁴) instead of LIBERO's placeholder inertial (3 kg, 1 kg·m², damping 1), which no fingertip could
   turn by 0.5 rad within the budget. The `turn_on` threshold (q ≥ 0.5) is unchanged.
 
 ## Known limitations
 
-* `put_the_wine_bottle_on_the_rack`: no working plan. The rack's `top_region` is a slab tilted 62.5°
-  (LIBERO's site); an upright bottle set at the site satisfies `On` while held (the tracker appends it)
-  but falls once released, and laying the bottle into the tilted cradle needs the hand pitched ~90° with
-  the bottle inside the rack's frame, which the current primitives do not do.
+* `put_the_wine_bottle_on_the_rack` succeeds in about a third of the episodes. The hand must stay
+  outside the rack's end frame (x ≤ site − 0.17 m), which for racks drawn towards −x is at the edge of
+  what the arm reaches with the hand horizontal so close to its base (the move stalls); and a bottle
+  pinched at the neck turns freely about the pinch once levelled, so it sometimes lands across the
+  trough's end and rolls out after release.
 * `open_the_top_drawer_and_put_the_bowl_inside` runs close to its 300-step budget (open, take the bowl
   from under the open drawer, drop it in).
 * Long multi-object tasks (T7, T8) use most of their step budget (transport speed is bounded by OSC_POSE's

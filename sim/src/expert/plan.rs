@@ -63,6 +63,8 @@ pub(super) struct Builder<'a> {
     next_dest: Option<[f64; 3]>,
     /// The destination is inside an open drawer (carry above its front, drop low).
     into_drawer: bool,
+    /// Where the last object was set down (the hand is above it when the next grasp starts).
+    last_dest: Option<[f64; 3]>,
 }
 
 impl<'a> Builder<'a> {
@@ -85,6 +87,7 @@ impl<'a> Builder<'a> {
             near_rim: false,
             into_drawer: false,
             next_dest: None,
+            last_dest: None,
         }
     }
 
@@ -425,6 +428,18 @@ impl<'a> Builder<'a> {
         });
         if (want_yaw - self.yaw).abs() > 1e-6 {
             self.yaw = want_yaw;
+            // Just released beside the cabinet, the turning hand (20 cm long) would sweep its
+            // drawer handles: turn above the cabinet's top instead.
+            let by_cabinet = self.last_dest.is_some_and(|d| {
+                self.scene.instances.iter().any(|i| {
+                    let q = self.env.data().body_pos(i.root_body);
+                    i.def.category == "wooden_cabinet"
+                        && ((q[0] - d[0]).powi(2) + (q[1] - d[1]).powi(2)).sqrt() < 0.32
+                })
+            });
+            if by_cabinet {
+                self.mv(Target::RelZ(1.16), 0.015, 25, 12.0);
+            }
             self.ops.push(Op::Yaw {
                 yaw: want_yaw,
                 grip: OPEN,
@@ -559,6 +574,11 @@ impl<'a> Builder<'a> {
             self.grasp(obj);
             self.next_dest = None;
         }
+        self.last_dest = Some(match &to {
+            Point::Body { inst, .. } | Point::Rim { inst, .. } => self.pos(*inst),
+            Point::Site { site, .. } => self.env.data().site_pos(*site),
+            Point::Abs(p) => *p,
+        });
         let into_basket =
             drop && matches!(&to, Point::Site { .. }) && self.cat(obj) == "cream_cheese";
         let to = self.within_reach(to);
@@ -1303,7 +1323,9 @@ fn side_clearance(
                     "wine_bottle" => 0.025,
                     "cream_cheese" => 0.04,
                     "basket" => 0.09,
-                    "wooden_cabinet" => 0.17,
+                    // The carcass's front corners (plus handles) reach 0.17 m from its origin; the
+                    // margin keeps a hand that then carries the bowl past a corner off it.
+                    "wooden_cabinet" => 0.23,
                     "flat_stove" => 0.1,
                     "wine_rack" => 0.19,
                     _ => 0.05,
