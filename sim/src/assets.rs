@@ -564,7 +564,10 @@ fn wine_rack(out: &mut String, p: &str) {
             [0.1345, 0.05, 0.0035],
             0.02,
         );
-        let lip = qrot(q_site, [0.0, -0.05, 0.012]);
+        // Site +y runs down the slope (−62.5° about x), so the lower edge is at +y; the lip stands
+        // 4 cm down from the site so a bottle lying in the trough keeps its axis (and origin) within
+        // the region's ±0.022 across the slope.
+        let lip = qrot(q_site, [0.0, 0.04, 0.012]);
         g.bx_rot(
             [
                 site_pos[0] + lip[0],

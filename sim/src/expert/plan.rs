@@ -42,6 +42,7 @@ enum GraspAt {
         off: [f64; 3],
         coin: bool,
         above: f64,
+        dest: Option<[f64; 3]>,
     },
 }
 
@@ -62,6 +63,8 @@ pub(super) struct Builder<'a> {
     next_dest: Option<[f64; 3]>,
     /// The destination is inside an open drawer (carry above its front, drop low).
     into_drawer: bool,
+    /// Where the last object was set down (the hand is above it when the next grasp starts).
+    last_dest: Option<[f64; 3]>,
 }
 
 impl<'a> Builder<'a> {
@@ -84,6 +87,7 @@ impl<'a> Builder<'a> {
             near_rim: false,
             into_drawer: false,
             next_dest: None,
+            last_dest: None,
         }
     }
 
@@ -226,7 +230,11 @@ impl<'a> Builder<'a> {
                     );
                 } else if let Some(r) = self.scene.regions.get(dest) {
                     let Some(site) = r.site else { return };
+                    let on_rack = r
+                        .parent
+                        .is_some_and(|p| self.scene.instances[p].def.category == "wine_rack");
                     match cat {
+                        "wine_bottle" if on_rack => self.lay_in_rack(obj, site, n),
                         "plate" => self.push_to(obj, site, n),
                         "basket" => self.drag_basket(obj, site, n),
                         _ => {
@@ -338,10 +346,15 @@ impl<'a> Builder<'a> {
                     off,
                     coin,
                     above: 0.07,
+                    dest: self.next_dest,
                 };
             }
             "wine_bottle" => (
-                [self.jit(0.002), self.jit(0.002), 0.13 + self.jit(0.006)],
+                [
+                    self.jit(0.002),
+                    self.jit(0.002),
+                    BOTTLE_NECK + self.jit(0.006),
+                ],
                 false,
                 0.08,
             ),
@@ -380,16 +393,23 @@ impl<'a> Builder<'a> {
                     local,
                 },
             ),
-            GraspAt::Rim { off, coin, above } => (
+            GraspAt::Rim {
+                off,
+                coin,
+                above,
+                dest,
+            } => (
                 Point::Rim {
                     inst: obj,
                     off: [off[0], off[1], off[2] + above],
                     coin,
+                    dest,
                 },
                 Point::Rim {
                     inst: obj,
                     off,
                     coin,
+                    dest,
                 },
             ),
         };
@@ -408,6 +428,18 @@ impl<'a> Builder<'a> {
         });
         if (want_yaw - self.yaw).abs() > 1e-6 {
             self.yaw = want_yaw;
+            // Just released beside the cabinet, the turning hand (20 cm long) would sweep its
+            // drawer handles: turn above the cabinet's top instead.
+            let by_cabinet = self.last_dest.is_some_and(|d| {
+                self.scene.instances.iter().any(|i| {
+                    let q = self.env.data().body_pos(i.root_body);
+                    i.def.category == "wooden_cabinet"
+                        && ((q[0] - d[0]).powi(2) + (q[1] - d[1]).powi(2)).sqrt() < 0.32
+                })
+            });
+            if by_cabinet {
+                self.mv(Target::RelZ(1.16), 0.015, 25, 12.0);
+            }
             self.ops.push(Op::Yaw {
                 yaw: want_yaw,
                 grip: OPEN,
@@ -429,7 +461,12 @@ impl<'a> Builder<'a> {
         } else {
             self.mv(Target::Grip(pre), 0.02, 90, 12.0);
             self.pause(OPEN);
-            self.mv(Target::Grip(at), 0.005, 40, 13.0);
+            // Far out and low the stretched arm drifts outwards under large commands: come down slower.
+            if horizontal_reach(self.expected_pos(obj)) > 0.66 {
+                self.mv(Target::Grip(at), 0.005, 60, 8.0);
+            } else {
+                self.mv(Target::Grip(at), 0.005, 40, 13.0);
+            }
         }
         let extra = if self.vary {
             self.rng.random_range(0..3)
@@ -467,6 +504,31 @@ impl<'a> Builder<'a> {
         };
         let along_y = clearance(0.0, 0.1);
         along_y < 0.0 && clearance(0.1, 0.0) > along_y
+    }
+
+    /// Whether the straight way of `obj` from `from` to `to` passes within 12 cm of another object
+    /// that stands up from the table (plates do not), other than at its two ends.
+    fn crosses_object(&self, obj: usize, from: [f64; 3], to: [f64; 3]) -> bool {
+        let (dx, dy) = (to[0] - from[0], to[1] - from[1]);
+        let len2 = dx * dx + dy * dy;
+        if len2 < 1e-6 {
+            return false;
+        }
+        self.scene.instances.iter().enumerate().any(|(k, inst)| {
+            if k == obj
+                || inst.def.kind != crate::assets::AssetKind::Movable
+                || inst.def.category == "plate"
+            {
+                return false;
+            }
+            let q = self.expected_pos(k);
+            let t = (((q[0] - from[0]) * dx + (q[1] - from[1]) * dy) / len2).clamp(0.0, 1.0);
+            let (px, py) = (from[0] + t * dx - q[0], from[1] + t * dy - q[1]);
+            let d = (px * px + py * py).sqrt();
+            let near_end =
+                |e: [f64; 3]| ((q[0] - e[0]).powi(2) + (q[1] - e[1]).powi(2)).sqrt() < 0.03;
+            d < 0.12 && !near_end(from) && !near_end(to)
+        })
     }
 
     fn release(&mut self) {
@@ -512,6 +574,11 @@ impl<'a> Builder<'a> {
             self.grasp(obj);
             self.next_dest = None;
         }
+        self.last_dest = Some(match &to {
+            Point::Body { inst, .. } | Point::Rim { inst, .. } => self.pos(*inst),
+            Point::Site { site, .. } => self.env.data().site_pos(*site),
+            Point::Abs(p) => *p,
+        });
         let into_basket =
             drop && matches!(&to, Point::Site { .. }) && self.cat(obj) == "cream_cheese";
         let to = self.within_reach(to);
@@ -528,7 +595,9 @@ impl<'a> Builder<'a> {
             Point::Rim { inst, .. } => self.pos(*inst),
         };
         let far = horizontal_reach(dest_p) > 0.68 || horizontal_reach(self.pos(obj)) > 0.68;
-        if far && !into_basket {
+        // Another bowl (or taller object) under the way there: a held bowl hangs tilted by the rim and
+        // would sweep it along at the lowered far-out carry height.
+        if far && !into_basket && !self.crosses_object(obj, before, dest_p) {
             cz -= 0.035;
         }
         if self.into_drawer
@@ -975,6 +1044,138 @@ impl<'a> Builder<'a> {
         out
     }
 
+    /// Lay a wine bottle into the rack's tilted cradle (the `top_region` slab is tilted 62.5° about x;
+    /// the bottle lies along x in the trough between the cradle plate and its lower lip, origin within
+    /// the slab). The neck is taken from the side with the hand horizontal (pointing −y, fingers
+    /// closing along x), the wrist rolls the bottle down to lie along x (fingers now along z: the
+    /// grasp pivots about the vertical, so gravity does not swing it), and the bottle is lowered into
+    /// the trough along its bisector with the hand outside the rack's side frame.
+    fn lay_in_rack(&mut self, obj: usize, site: usize, n: usize) {
+        use nalgebra::{Rotation3, Vector3};
+        use std::f64::consts::FRAC_PI_2;
+        if self.held.is_some() {
+            self.release();
+        }
+        let b = self.pos(obj);
+        let gh = BOTTLE_NECK + self.jit(0.004);
+        let neck = [b[0] + self.jit(0.002), b[1], b[2] + gh];
+        let c = self.env.data().site_pos(site);
+        let m = self.env.data().site_mat(site);
+        // Site axes in the world: y down the slope, z the slab's normal.
+        let sy = [m[1], m[4], m[7]];
+        let sz = [m[2], m[5], m[8]];
+        // Bottom centre: 1.45 cm down the slope from the site, 2.4 cm off the plate, 5 cm towards
+        // the robot along x; the neck (and the hand) then sits outside the cradle's end.
+        let along = 0.0145;
+        let up = 0.024;
+        let dx = -0.038 + self.jit(0.003);
+        let tb = [
+            c[0] + along * sy[0] + up * sz[0] + dx,
+            c[1] + along * sy[1] + up * sz[1],
+            c[2] + along * sy[2] + up * sz[2],
+        ];
+        let g = [tb[0] - gh, tb[1], tb[2]];
+        let g_pre = [g[0], g[1], g[2] + 0.08];
+        let high = g_pre[2].max(1.28);
+        let mat = |r: Rotation3<f64>| -> [f64; 9] {
+            let m = r.into_inner();
+            [
+                m[(0, 0)],
+                m[(0, 1)],
+                m[(0, 2)],
+                m[(1, 0)],
+                m[(1, 1)],
+                m[(1, 2)],
+                m[(2, 0)],
+                m[(2, 1)],
+                m[(2, 2)],
+            ]
+        };
+        let rz = Rotation3::from_axis_angle(&Vector3::z_axis(), FRAC_PI_2);
+        let rx = Rotation3::from_axis_angle(&Vector3::x_axis(), -FRAC_PI_2);
+        let ry = Rotation3::from_axis_angle(&Vector3::y_axis(), -FRAC_PI_2);
+        // Carried rolled 20° short of level: the pinch axis leans towards +x, so gravity holds the
+        // bottle pointing +x (20° down) instead of leaving it free to turn about a vertical axis.
+        let ry_carry = Rotation3::from_axis_angle(&Vector3::y_axis(), -FRAC_PI_2 + 0.35);
+        self.ops.push(Op::Grip {
+            cmd: OPEN,
+            steps: 0,
+        });
+        // Hand horizontal, pointing −y, fingers closing along x.
+        self.yaw = FRAC_PI_2;
+        self.ops.push(Op::Attitude {
+            rot: mat(rx * rz),
+            grip: OPEN,
+            max: 0,
+            hold: true,
+        });
+        self.mv(
+            Target::Grip(Point::Abs([neck[0], neck[1] + 0.11, neck[2] + 0.02])),
+            0.015,
+            80,
+            12.0,
+        );
+        self.ops.push(Op::Attitude {
+            rot: mat(rx * rz),
+            grip: OPEN,
+            max: 20,
+            hold: true,
+        });
+        self.pause(OPEN);
+        self.mv(Target::Grip(Point::Abs(neck)), 0.004, 40, 10.0);
+        self.ops.push(Op::Grip {
+            cmd: CLOSE,
+            steps: 12,
+        });
+        self.held = Some(obj);
+        self.mv(Target::Rel([0.0, 0.0, 0.05]), 0.01, 30, 12.0);
+        // Roll about the pointing axis while rising: the bottle comes down to lie along x, bottom
+        // towards +x.
+        self.ops.push(Op::Attitude {
+            rot: mat(ry_carry * rx * rz),
+            grip: CLOSE,
+            max: 0,
+            hold: true,
+        });
+        // Held by the neck the bottle turns freely about the vertical (a point pinch has no torsional
+        // friction) and its centre of mass is 6 cm out: move gently, over the rack's frame, x first.
+        self.mv(Target::RelZ(high), 0.015, 40, 8.0);
+        self.ops.push(Op::Attitude {
+            rot: mat(ry_carry * rx * rz),
+            grip: CLOSE,
+            max: 20,
+            hold: true,
+        });
+        self.mv(
+            Target::Grip(Point::Abs([g_pre[0], g_pre[1], high])),
+            0.012,
+            90,
+            8.0,
+        );
+        self.mv(Target::Grip(Point::Abs(g_pre)), 0.008, 50, 8.0);
+        // Level it over the trough (the hand is still, so it keeps pointing along x), then straight
+        // down into it (sideways motion would turn it).
+        self.ops.push(Op::Attitude {
+            rot: mat(ry * rx * rz),
+            grip: CLOSE,
+            max: 20,
+            hold: true,
+        });
+        self.mv(Target::Grip(Point::Abs(g)), 0.004, 40, 6.0);
+        self.ops.push(Op::WaitSatisfied {
+            n,
+            max: 30,
+            grip: CLOSE,
+        });
+        self.ops.push(Op::Grip {
+            cmd: OPEN,
+            steps: 10,
+        });
+        self.held = None;
+        // Back out along the hand's axis, then up.
+        self.mv(Target::Rel([0.0, 0.08, 0.0]), 0.015, 30, 12.0);
+    }
+
     /// Turn a stove knob on: pinch its pointer bar across its thickness with the hand yawed along the
     /// bar, then twist the wrist about the knob's axis.
     fn turn_knob(&mut self, stove: usize, n: usize) {
@@ -1051,6 +1252,55 @@ pub(super) fn clear_side(
     r: f64,
     coin: bool,
 ) -> f64 {
+    pick_side(side_clearance(scene, env, obj, p, r, true), coin)
+}
+
+/// [`clear_side`] over both the bowl's place `p` and (when given) its destination `dest`: a side
+/// scores its smaller clearance of the two (a hand that fits at the source can still meet a fixture
+/// where the bowl is set down). A side where the hand meets something here while the other is free
+/// is never taken.
+pub(super) fn clear_side_both(
+    scene: &Scene,
+    env: &Env,
+    obj: usize,
+    p: [f64; 3],
+    dest: Option<[f64; 3]>,
+    r: f64,
+    coin: bool,
+) -> f64 {
+    let free = side_clearance(scene, env, obj, p, r, false);
+    if (free[0] < 0.0) != (free[1] < 0.0) {
+        return if free[0] >= 0.0 { 1.0 } else { -1.0 };
+    }
+    let mut best = side_clearance(scene, env, obj, p, r, true);
+    if let Some(d) = dest {
+        let at = side_clearance(scene, env, obj, d, r, true);
+        for s in 0..2 {
+            best[s] = best[s].min(at[s]);
+        }
+    }
+    pick_side(best, coin)
+}
+
+fn pick_side(best: [f64; 2], coin: bool) -> f64 {
+    if (best[0] - best[1]).abs() < 0.02 || best[0].min(best[1]) > 0.08 {
+        if coin { 1.0 } else { -1.0 }
+    } else if best[0] > best[1] {
+        1.0
+    } else {
+        -1.0
+    }
+}
+
+/// Clearance of the hand on the +y and −y side of `p` (see [`clear_side`]).
+fn side_clearance(
+    scene: &Scene,
+    env: &Env,
+    obj: usize,
+    p: [f64; 3],
+    r: f64,
+    reach: bool,
+) -> [f64; 2] {
     let mut best = [f64::MAX; 2];
     for (s, side) in [1.0, -1.0].iter().enumerate() {
         for reach in [r, r + 0.06, r + 0.1] {
@@ -1073,12 +1323,21 @@ pub(super) fn clear_side(
                     "wine_bottle" => 0.025,
                     "cream_cheese" => 0.04,
                     "basket" => 0.09,
-                    "wooden_cabinet" => 0.17,
+                    // The carcass's front corners (plus handles) reach 0.17 m from its origin; the
+                    // margin keeps a hand that then carries the bowl past a corner off it.
+                    "wooden_cabinet" => 0.23,
                     "flat_stove" => 0.1,
                     "wine_rack" => 0.19,
                     _ => 0.05,
                 };
                 let mut q = env.data().body_pos(scene.instances[k].root_body);
+                if inst.def.kind == crate::assets::AssetKind::Movable
+                    && ((q[0] - p[0]).powi(2) + (q[1] - p[1]).powi(2)).sqrt() < 0.03
+                {
+                    // Standing at `p` itself (a destination still occupied when the plan is made):
+                    // it will have been moved away by then.
+                    continue;
+                }
                 if inst.def.category == "flat_stove" {
                     let b = scene.instances[k].root_body;
                     let o = qrot(env.data().body_quat(b), [0.1, 0.0, 0.0]);
@@ -1091,25 +1350,25 @@ pub(super) fn clear_side(
     }
     // Reach: the arm straightens (a singularity OSC cannot leave) beyond ~0.72 m from the shoulder.
     for (s, side) in [1.0, -1.0].iter().enumerate() {
+        if !reach {
+            break;
+        }
         let h = horizontal_reach([p[0], p[1] + side * r, p[2]]);
         if h > 0.69 {
             best[s] -= 10.0 * (h - 0.69) + 0.05;
         }
     }
-    if (best[0] - best[1]).abs() < 0.02 || best[0].min(best[1]) > 0.08 {
-        if coin { 1.0 } else { -1.0 }
-    } else if best[0] > best[1] {
-        1.0
-    } else {
-        -1.0
-    }
+    best
 }
+
+/// Height of the bottle's neck grasp above its origin (bottom centre).
+pub(super) const BOTTLE_NECK: f64 = 0.13;
 
 /// The Panda's shoulder (joint 2 axis) in the world.
 pub(super) const SHOULDER: [f64; 3] = [-0.66, 0.0, 1.245];
 
 /// Horizontal distance of a point from the shoulder.
-fn horizontal_reach(p: [f64; 3]) -> f64 {
+pub(super) fn horizontal_reach(p: [f64; 3]) -> f64 {
     ((p[0] - SHOULDER[0]).powi(2) + (p[1] - SHOULDER[1]).powi(2)).sqrt()
 }
 
