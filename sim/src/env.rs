@@ -223,10 +223,13 @@ impl Env {
         };
         let pack = match assets {
             crate::pack::AssetPack::Builtin => None,
-            crate::pack::AssetPack::Libero => Some(
-                crate::pack::LiberoPack::locate_default()
-                    .map_err(|e| EnvError::Config(e.to_string()))?,
-            ),
+            crate::pack::AssetPack::Libero => {
+                let mut p = crate::pack::LiberoPack::locate_default()
+                    .map_err(|e| EnvError::Config(e.to_string()))?;
+                // The full robot meshes with the LIBERO look (high quality), light ones otherwise.
+                p.light_robot = cfg.quality != RenderQuality::high();
+                Some(p)
+            }
         };
         let scene = Scene::build_with(SceneSpec::from_problem(&task.problem), pack.as_ref())?;
         for a in task.problem.init.iter().chain(task.problem.goal.atoms()) {

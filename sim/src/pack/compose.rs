@@ -519,9 +519,12 @@ pub fn robot_visuals(pack: &LiberoPack) -> Result<RobotVisuals, ComposeError> {
                 }
                 let mut c = c.clone();
                 if let Some(f) = c.attr("file") {
-                    let abs = dir.join(f);
+                    let mut abs = dir.join(f);
                     if !abs.exists() {
                         return Err(xml_err(format!("{} `{f}` not found", c.tag)));
+                    }
+                    if c.tag == "mesh" && pack.light_robot {
+                        abs = light_mesh(pack, &root, &abs)?;
                     }
                     c.set("file", abs.display().to_string());
                 }
@@ -553,6 +556,169 @@ pub fn robot_visuals(pack: &LiberoPack) -> Result<RobotVisuals, ComposeError> {
         }
     }
     Ok(out)
+}
+
+/// Grid cell (m) of the light robot meshes' vertex clustering: about a pixel of the 128² agentview
+/// at the robot.
+const LIGHT_MESH_CELL: f64 = 0.008;
+
+/// Meshes with fewer vertices keep their full version.
+const LIGHT_MESH_MIN_VERTICES: usize = 1000;
+
+/// The light version of a robot visual mesh (OBJ or STL): vertices clustered on a
+/// [`LIGHT_MESH_CELL`] grid (each cell's vertices merged to their mean, collapsed triangles
+/// dropped), written once as OBJ under `<pack>/lod/` (atomically) and reused. robosuite's Panda
+/// visuals are about 318k vertices, which llvmpipe transforms on the CPU for every camera; the light
+/// meshes keep the silhouette at a fraction of the cost. Written by hand: vertex clustering is a few
+/// lines, and it keeps the build free of a C++ mesh library.
+fn light_mesh(pack: &LiberoPack, base: &Path, src: &Path) -> Result<PathBuf, ComposeError> {
+    let err = |message: String| ComposeError::Xml {
+        path: src.to_path_buf(),
+        message,
+    };
+    let rel = src
+        .strip_prefix(base)
+        .unwrap_or(src)
+        .to_string_lossy()
+        .replace(['/', '\\'], "__");
+    let out = pack.root.join("lod").join(format!("{rel}.light.obj"));
+    if out.is_file() {
+        return Ok(out);
+    }
+    let bytes = std::fs::read(src).map_err(|e| err(e.to_string()))?;
+    let (verts, tris) = if src
+        .extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("obj"))
+    {
+        read_obj(&String::from_utf8_lossy(&bytes))
+    } else {
+        read_stl(&bytes)
+    }
+    .map_err(err)?;
+    // Small parts are not what costs; they keep their own mesh (and would collapse).
+    if verts.len() < LIGHT_MESH_MIN_VERTICES {
+        return Ok(src.to_path_buf());
+    }
+    let mut cells: HashMap<[i64; 3], usize> = HashMap::new();
+    let mut sums: Vec<([f64; 3], f64)> = Vec::new();
+    let remap: Vec<usize> = verts
+        .iter()
+        .map(|v| {
+            let key = v.map(|x| (x / LIGHT_MESH_CELL).floor() as i64);
+            *cells.entry(key).or_insert_with(|| {
+                sums.push(([0.0; 3], 0.0));
+                sums.len() - 1
+            })
+        })
+        .collect();
+    for (v, &k) in verts.iter().zip(&remap) {
+        let (sum, n) = &mut sums[k];
+        for (s, x) in sum.iter_mut().zip(v) {
+            *s += x;
+        }
+        *n += 1.0;
+    }
+    let mut seen = std::collections::HashSet::new();
+    let mut text = String::new();
+    for (p, n) in &sums {
+        let _ = writeln!(text, "v {} {} {}", p[0] / n, p[1] / n, p[2] / n);
+    }
+    let mut faces = 0usize;
+    for t in &tris {
+        let [a, b, c] = t.map(|i| remap[i]);
+        if a == b || b == c || a == c {
+            continue;
+        }
+        let mut key = [a, b, c];
+        key.sort_unstable();
+        if seen.insert(key) {
+            let _ = writeln!(text, "f {} {} {}", a + 1, b + 1, c + 1);
+            faces += 1;
+        }
+    }
+    if faces < 16 {
+        return Ok(src.to_path_buf());
+    }
+    let dir = out.parent().expect("lod/ has a parent");
+    std::fs::create_dir_all(dir).map_err(|e| err(e.to_string()))?;
+    // Written beside the final name and renamed, so a reader never sees half a file; the name is
+    // unique per process and thread, as two workers may make the same mesh at once.
+    let tmp = dir.join(format!(
+        "{rel}.{}.{:?}.partial",
+        std::process::id(),
+        std::thread::current().id()
+    ));
+    std::fs::write(&tmp, text).map_err(|e| err(e.to_string()))?;
+    std::fs::rename(&tmp, &out).map_err(|e| err(e.to_string()))?;
+    Ok(out)
+}
+
+/// A triangle mesh: vertices and vertex-index triples.
+type MeshData = (Vec<[f64; 3]>, Vec<[usize; 3]>);
+
+/// Vertices and triangles of an OBJ file (`v` and `f` lines; polygons fanned; negative indices).
+fn read_obj(text: &str) -> Result<MeshData, String> {
+    let (mut verts, mut tris) = (Vec::new(), Vec::new());
+    for (n, line) in text.lines().enumerate() {
+        let mut it = line.split_whitespace();
+        match it.next() {
+            Some("v") => {
+                let v: Vec<f64> = it.take(3).filter_map(|x| x.parse().ok()).collect();
+                if v.len() != 3 {
+                    return Err(format!("line {}: a vertex needs 3 numbers", n + 1));
+                }
+                verts.push([v[0], v[1], v[2]]);
+            }
+            Some("f") => {
+                let idx: Result<Vec<usize>, String> = it
+                    .map(|tok| {
+                        let i: i64 = tok
+                            .split('/')
+                            .next()
+                            .and_then(|x| x.parse().ok())
+                            .ok_or_else(|| format!("line {}: bad face index `{tok}`", n + 1))?;
+                        let i = if i < 0 { verts.len() as i64 + i } else { i - 1 };
+                        usize::try_from(i)
+                            .ok()
+                            .filter(|&i| i < verts.len())
+                            .ok_or_else(|| format!("line {}: face index {tok} out of range", n + 1))
+                    })
+                    .collect();
+                let idx = idx?;
+                for k in 1..idx.len().saturating_sub(1) {
+                    tris.push([idx[0], idx[k], idx[k + 1]]);
+                }
+            }
+            _ => {}
+        }
+    }
+    Ok((verts, tris))
+}
+
+/// Vertices and triangles of a binary STL file.
+fn read_stl(bytes: &[u8]) -> Result<MeshData, String> {
+    let n = bytes
+        .get(80..84)
+        .map(|b| u32::from_le_bytes([b[0], b[1], b[2], b[3]]) as usize)
+        .ok_or("shorter than an STL header")?;
+    if bytes.len() < 84 + 50 * n {
+        return Err(format!(
+            "truncated: {n} triangles need {} bytes",
+            84 + 50 * n
+        ));
+    }
+    let f =
+        |o: usize| f32::from_le_bytes([bytes[o], bytes[o + 1], bytes[o + 2], bytes[o + 3]]) as f64;
+    let (mut verts, mut tris) = (Vec::with_capacity(3 * n), Vec::with_capacity(n));
+    for t in 0..n {
+        let o = 84 + 50 * t + 12;
+        for k in 0..3 {
+            let p = o + 12 * k;
+            verts.push([f(p), f(p + 4), f(p + 8)]);
+        }
+        tris.push([3 * t, 3 * t + 1, 3 * t + 2]);
+    }
+    Ok((verts, tris))
 }
 
 /// LIBERO's arena from the pack's scene XML: `<asset>` children and the `<worldbody>` children
@@ -726,6 +892,65 @@ fn prefix(e: &mut Element, instance: &str) {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn obj_and_stl_readers_fan_polygons_and_resolve_indices() {
+        let (v, t) = read_obj(
+            "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nvn 0 0 1\nf 1/1/1 2/2/2 3/3/3 4/4/4\nf -4 -3 -1\n",
+        )
+        .unwrap();
+        assert_eq!(v.len(), 4);
+        assert_eq!(t, vec![[0, 1, 2], [0, 2, 3], [0, 1, 3]]);
+        assert!(read_obj("v 0 0\n").unwrap_err().contains("line 1"));
+        assert!(
+            read_obj("v 0 0 0\nf 1 2 3\n")
+                .unwrap_err()
+                .contains("out of range")
+        );
+        let mut stl = vec![0u8; 84];
+        stl[80] = 1;
+        stl.extend(std::iter::repeat_n(0u8, 12));
+        for x in [1.0f32, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0] {
+            stl.extend(x.to_le_bytes());
+        }
+        stl.extend([0, 0]);
+        let (v, t) = read_stl(&stl).unwrap();
+        assert_eq!(v, vec![[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]]);
+        assert_eq!(t, vec![[0, 1, 2]]);
+        assert!(read_stl(&stl[..100]).unwrap_err().contains("truncated"));
+    }
+
+    /// With the pack installed: the light robot meshes cut the vertex count several-fold and keep
+    /// the mesh's extent to within a clustering cell.
+    #[test]
+    fn light_robot_meshes_are_smaller_and_keep_their_extent() {
+        let Some(pack) = LiberoPack::for_tests() else {
+            return;
+        };
+        let base = pack.robosuite_assets();
+        let src = base.join("robots/panda/obj_meshes/link1_vis/link1_vis.obj");
+        let light = light_mesh(&pack, &base, &src).unwrap();
+        assert_ne!(light, src);
+        let read = |p: &Path| read_obj(&std::fs::read_to_string(p).unwrap()).unwrap();
+        let ((v0, t0), (v1, t1)) = (read(&src), read(&light));
+        assert!(
+            t1.len() * 2 < t0.len() && v1.len() * 4 < v0.len(),
+            "{} → {}",
+            v0.len(),
+            v1.len()
+        );
+        let extent = |v: &[[f64; 3]], d: usize| {
+            let lo = v.iter().map(|p| p[d]).fold(f64::INFINITY, f64::min);
+            let hi = v.iter().map(|p| p[d]).fold(f64::NEG_INFINITY, f64::max);
+            (lo, hi)
+        };
+        for d in [0, 1, 2] {
+            let ((a0, b0), (a1, b1)) = (extent(&v0, d), extent(&v1, d));
+            assert!((a0 - a1).abs() < LIGHT_MESH_CELL && (b0 - b1).abs() < LIGHT_MESH_CELL);
+        }
+        // A second call reuses the file.
+        assert_eq!(light_mesh(&pack, &base, &src).unwrap(), light);
+    }
 
     #[test]
     fn defaults_are_inlined_along_the_class_chain() {

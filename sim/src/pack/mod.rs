@@ -52,6 +52,9 @@ pub const LIBERO_SUITES: [&str; 5] = [
 pub struct LiberoPack {
     /// `<cache>/libero`.
     pub root: PathBuf,
+    /// Dress the Panda in light (vertex-clustered) copies of robosuite's visual meshes, for fast
+    /// rendering; off (the default) uses the full meshes, LIBERO's exact look.
+    pub light_robot: bool,
 }
 
 impl LiberoPack {
@@ -60,6 +63,7 @@ impl LiberoPack {
     pub fn locate(root: &Path) -> Result<LiberoPack, PackError> {
         let pack = LiberoPack {
             root: root.join("libero"),
+            light_robot: false,
         };
         for w in &LIBERO_WHEELS {
             let d = pack.unpacked(w.name);
