@@ -85,10 +85,26 @@ pub struct OscPose {
     goal_ori: Matrix3<f64>,
     q0: Vec7,
     kd: f64,
+    /// The state read when the controller was made, used by the first `set_goal` and the first
+    /// `torques` after it (robosuite's update flag stays clear until the first control pass).
+    cached: Option<Snapshot>,
     // scratch
     jacp: Vec<f64>,
     jacr: Vec<f64>,
     mass: Vec<f64>,
+}
+
+/// What the controller reads from the simulation for one torque computation.
+#[derive(Debug, Clone)]
+struct Snapshot {
+    jp: Mat3x7,
+    jo: Mat3x7,
+    m: Mat7,
+    q: Vec7,
+    qd: Vec7,
+    bias: Vec7,
+    p: Vector3<f64>,
+    r: Matrix3<f64>,
 }
 
 /// Pose and velocity of the controlled site, as the controller sees them.
@@ -103,23 +119,64 @@ pub struct EefState {
 impl OscPose {
     /// A controller whose goal is the current site pose and whose posture target is the current arm qpos
     /// (robosuite re-creates it at every `reset()`). `data` must be after a forward pass.
-    pub fn new(ids: PandaIds, data: &Data) -> OscPose {
+    ///
+    /// As robosuite's, it keeps the state it read here until its first control pass: the first
+    /// [`OscPose::set_goal`] anchors at the site pose read here and the first [`OscPose::torques`]
+    /// uses the Jacobians, mass matrix, bias and velocities read here. When the state is unchanged
+    /// in between (a normal reset) that is the same as reading it fresh; after LIBERO's
+    /// `set_init_state`, which writes a new state without touching the controller, the first step
+    /// pulls toward the reset pose (libero.md §5.5).
+    pub fn new(ids: PandaIds, data: &mut Data) -> OscPose {
         let nv = data.model().nv();
         let mut q0 = Vec7::zeros();
         for i in 0..7 {
             q0[i] = data.qpos()[ids.arm_qpos[i]];
         }
         let site = ids.grip_site;
-        OscPose {
+        let mut osc = OscPose {
             goal_pos: Vector3::from(data.site_pos(site)),
             goal_ori: Matrix3::from_row_slice(&data.site_mat(site)),
             q0,
             kd: 2.0 * KP.sqrt(),
             ids,
+            cached: None,
             jacp: vec![0.0; 3 * nv],
             jacr: vec![0.0; 3 * nv],
             mass: vec![0.0; nv * nv],
+        };
+        osc.cached = Some(osc.snapshot(data));
+        osc
+    }
+
+    /// Reads what one torque computation needs from `data`.
+    fn snapshot(&mut self, data: &mut Data) -> Snapshot {
+        let ids = &self.ids;
+        let nv = data.model().nv();
+        data.jac_site_into(ids.grip_site, &mut self.jacp, &mut self.jacr);
+        data.mass_matrix_into(&mut self.mass);
+        let mut s = Snapshot {
+            jp: Mat3x7::zeros(),
+            jo: Mat3x7::zeros(),
+            m: Mat7::zeros(),
+            q: Vec7::zeros(),
+            qd: Vec7::zeros(),
+            bias: Vec7::zeros(),
+            p: Vector3::from(data.site_pos(ids.grip_site)),
+            r: Matrix3::from_row_slice(&data.site_mat(ids.grip_site)),
+        };
+        for (c, &dof) in ids.arm_dof.iter().enumerate() {
+            for r in 0..3 {
+                s.jp[(r, c)] = self.jacp[r * nv + dof];
+                s.jo[(r, c)] = self.jacr[r * nv + dof];
+            }
+            for (c2, &dof2) in ids.arm_dof.iter().enumerate() {
+                s.m[(c, c2)] = self.mass[dof * nv + dof2];
+            }
+            s.q[c] = data.qpos()[ids.arm_qpos[c]];
+            s.qd[c] = data.qvel()[dof];
+            s.bias[c] = data.qfrc_bias()[dof];
         }
+        s
     }
 
     /// Current goal position.
@@ -138,16 +195,22 @@ impl OscPose {
         out
     }
 
-    /// Sets a new goal from a 6-D delta action (clipped to [−1, 1]), anchored at the current site pose.
+    /// Sets a new goal from a 6-D delta action (clipped to [−1, 1]), anchored at the current site pose
+    /// (before the first control pass: the pose read when the controller was made).
     pub fn set_goal(&mut self, data: &Data, delta: [f64; 6]) {
         let a: Vec<f64> = delta.iter().map(|v| v.clamp(-1.0, 1.0)).collect();
         let site = self.ids.grip_site;
-        let p = Vector3::from(data.site_pos(site));
+        let (p, r) = match &self.cached {
+            Some(c) => (c.p, c.r),
+            None => (
+                Vector3::from(data.site_pos(site)),
+                Matrix3::from_row_slice(&data.site_mat(site)),
+            ),
+        };
         self.goal_pos = p + Vector3::new(a[0], a[1], a[2]) * POS_SCALE;
         let rot = [a[3] * ROT_SCALE, a[4] * ROT_SCALE, a[5] * ROT_SCALE];
         // robosuite updates the goal orientation only when some rotation input is exactly non-zero.
-        if rot.iter().any(|&r| r != 0.0) {
-            let r = Matrix3::from_row_slice(&data.site_mat(site));
+        if rot.iter().any(|&x| x != 0.0) {
             self.goal_ori = axis_angle_to_mat(rot) * r;
         }
     }
@@ -155,33 +218,25 @@ impl OscPose {
     /// Computes the arm torques `[7]` for the current state (positions, velocities, `qM` and `qfrc_bias`
     /// must be current, e.g. after `mj_step1`), already clipped to the actuator limits.
     pub fn torques(&mut self, data: &mut Data) -> [f64; 7] {
-        let ids = &self.ids;
-        let nv = data.model().nv();
-        data.jac_site_into(ids.grip_site, &mut self.jacp, &mut self.jacr);
-        data.mass_matrix_into(&mut self.mass);
-        let mut jp = Mat3x7::zeros();
-        let mut jo = Mat3x7::zeros();
-        let mut m = Mat7::zeros();
-        let (mut q, mut qd, mut bias) = (Vec7::zeros(), Vec7::zeros(), Vec7::zeros());
-        for (c, &dof) in ids.arm_dof.iter().enumerate() {
-            for r in 0..3 {
-                jp[(r, c)] = self.jacp[r * nv + dof];
-                jo[(r, c)] = self.jacr[r * nv + dof];
-            }
-            for (c2, &dof2) in ids.arm_dof.iter().enumerate() {
-                m[(c, c2)] = self.mass[dof * nv + dof2];
-            }
-            q[c] = data.qpos()[ids.arm_qpos[c]];
-            qd[c] = data.qvel()[dof];
-            bias[c] = data.qfrc_bias()[dof];
-        }
+        let s = match self.cached.take() {
+            Some(c) => c,
+            None => self.snapshot(data),
+        };
+        let Snapshot {
+            jp,
+            jo,
+            m,
+            q,
+            qd,
+            bias,
+            p,
+            r,
+        } = s;
         let mut j = Mat6x7::zeros();
         j.fixed_view_mut::<3, 7>(0, 0).copy_from(&jp);
         j.fixed_view_mut::<3, 7>(3, 0).copy_from(&jo);
         let m_inv = m.try_inverse().unwrap_or_else(Mat7::zeros);
 
-        let p = Vector3::from(data.site_pos(ids.grip_site));
-        let r = Matrix3::from_row_slice(&data.site_mat(ids.grip_site));
         let v = jp * qd;
         let w = jo * qd;
         let e_p = self.goal_pos - p;

@@ -289,7 +289,7 @@ impl Env {
                 .collect(),
             World::Minimal { .. } => Vec::new(),
         };
-        let osc = OscPose::new(ids.clone(), &data);
+        let osc = OscPose::new(ids.clone(), &mut data);
         Ok(Env {
             model,
             data,
@@ -456,7 +456,7 @@ impl Env {
     fn restart_control(&mut self) -> Result<(), EnvError> {
         self.data.ctrl_mut().fill(0.0);
         self.data.forward()?;
-        self.osc = OscPose::new(self.ids.clone(), &self.data);
+        self.osc = OscPose::new(self.ids.clone(), &mut self.data);
         self.gripper = GripperRamp::default();
         Ok(())
     }
