@@ -284,14 +284,7 @@ pub fn categories() -> Vec<&'static str> {
 }
 
 /// Workspace categories provided by the arena itself (`table` → `main_table`, `kitchen_table`, …).
-pub const WORKSPACE_CATEGORIES: &[&str] = &[
-    "table",
-    "kitchen_table",
-    "living_room_table",
-    "study_table",
-    "floor",
-    "coffee_table",
-];
+pub use crate::task::bddl::WORKSPACE_CATEGORIES;
 
 // --- geometry helpers -----------------------------------------------------------------------------
 

@@ -116,6 +116,17 @@ impl Element {
     }
 }
 
+/// Reads and parses an XML file into an [`Element`] tree; errors name the file.
+fn read_element(path: &Path) -> Result<Element, ComposeError> {
+    let xml_err = |message: String| ComposeError::Xml {
+        path: path.to_path_buf(),
+        message,
+    };
+    let text = std::fs::read_to_string(path).map_err(|e| xml_err(e.to_string()))?;
+    let doc = roxmltree::Document::parse(&text).map_err(|e| xml_err(e.to_string()))?;
+    Ok(Element::from_node(doc.root_element()))
+}
+
 /// Attributes that name something (and so get the instance prefix).
 const NAME_REFS: [&str; 6] = ["name", "mesh", "material", "texture", "joint", "site"];
 
@@ -195,9 +206,7 @@ impl LiberoObject {
             path: path.clone(),
             message,
         };
-        let text = std::fs::read_to_string(&path).map_err(|e| xml_err(e.to_string()))?;
-        let doc = roxmltree::Document::parse(&text).map_err(|e| xml_err(e.to_string()))?;
-        let root = Element::from_node(doc.root_element());
+        let root = read_element(&path)?;
         let dir = path.parent().unwrap_or(Path::new(".")).to_path_buf();
         let meshdir = root
             .children
@@ -481,9 +490,7 @@ pub fn robot_visuals(pack: &LiberoPack) -> Result<RobotVisuals, ComposeError> {
             path: path.clone(),
             message,
         };
-        let text = std::fs::read_to_string(&path).map_err(|e| xml_err(e.to_string()))?;
-        let doc = roxmltree::Document::parse(&text).map_err(|e| xml_err(e.to_string()))?;
-        let doc_root = Element::from_node(doc.root_element());
+        let doc_root = read_element(&path)?;
         let dir = path.parent().unwrap_or(Path::new(".")).to_path_buf();
         let mut defaults = Defaults::new();
         for d in doc_root.children.iter().filter(|c| c.tag == "default") {
@@ -775,9 +782,7 @@ pub fn arena_xml(pack: &LiberoPack, arena: crate::scene::Arena) -> Result<ArenaX
         path: path.clone(),
         message,
     };
-    let text = std::fs::read_to_string(&path).map_err(|e| xml_err(e.to_string()))?;
-    let doc = roxmltree::Document::parse(&text).map_err(|e| xml_err(e.to_string()))?;
-    let root = Element::from_node(doc.root_element());
+    let root = read_element(&path)?;
     let dir = path.parent().unwrap_or(Path::new(".")).to_path_buf();
     let textures = pack.assets_dir().join("textures");
     let mut out = ArenaXml::default();
