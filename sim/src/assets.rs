@@ -530,50 +530,103 @@ fn wine_bottle(out: &mut String, p: &str) {
     cap.cyl([0.0, 0.0, 0.1545], 0.0095, 0.0035, 0.0005);
 }
 
-/// Wine rack: 0.269 × 0.254 × 0.33 m frame with a cradle tilted −62.5° about x holding a lying bottle.
+/// Angle of the wine rack's shelves above the horizontal, rising towards the rack's +y (degrees).
+const RACK_SHELF_DEG: f64 = 31.28;
+/// Centre (y, z) of the rack's top shelf board in the rack's frame; half size (x, along, thickness).
+const RACK_TOP_SHELF: [f64; 2] = [-0.0061, 0.25118];
+const RACK_SHELF_HALF: [f64; 3] = [0.13438, 0.07894, 0.0045];
+/// Centre (y, z) of the stopper along the top shelf's lower edge, its angle (degrees) and half size
+/// (x, thickness, height).
+const RACK_TOP_STOPPER: [f64; 2] = [-0.07477, 0.22072];
+const RACK_STOPPER_DEG: f64 = 29.3;
+const RACK_STOPPER_HALF: [f64; 3] = [0.13222, 0.00108, 0.00867];
+
+/// The wine rack's top shelf in the rack's frame, in the (y, z) plane: what a bottle laid in the rack
+/// rests on.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct RackShelf {
+    /// A point of the upper surface, above the board's centre.
+    pub surface: [f64; 2],
+    /// Unit vector up the incline.
+    pub incline: [f64; 2],
+    /// Unit normal of the upper surface.
+    pub normal: [f64; 2],
+    /// Where the stopper's upper face crosses the incline, from `surface` along `incline` (m).
+    pub stopper: f64,
+    /// Half length of the shelf along x (m).
+    pub half_x: f64,
+}
+
+/// The top shelf of the builtin wine rack (LIBERO's layout, so it also describes the pack's rack).
+pub fn wine_rack_top_shelf() -> RackShelf {
+    let a = RACK_SHELF_DEG.to_radians();
+    let incline = [a.cos(), a.sin()];
+    let normal = [-a.sin(), a.cos()];
+    let surface = [
+        RACK_TOP_SHELF[0] + RACK_SHELF_HALF[2] * normal[0],
+        RACK_TOP_SHELF[1] + RACK_SHELF_HALF[2] * normal[1],
+    ];
+    let b = RACK_STOPPER_DEG.to_radians();
+    let face = [
+        RACK_TOP_STOPPER[0] + RACK_STOPPER_HALF[1] * b.cos(),
+        RACK_TOP_STOPPER[1] + RACK_STOPPER_HALF[1] * b.sin(),
+    ];
+    let stopper = (face[0] - surface[0]) * incline[0] + (face[1] - surface[1]) * incline[1];
+    RackShelf {
+        surface,
+        incline,
+        normal,
+        stopper,
+        half_x: RACK_SHELF_HALF[0],
+    }
+}
+
+/// Wine rack: 0.269 × 0.254 × 0.33 m, laid out as LIBERO's collision model: a footed base, a central
+/// post leaning 16° towards +y, and two shelves inclined 31.3° (rising towards +y) with a 1.4 cm
+/// stopper along each lower edge. Bottles lie on a shelf against its stopper; the `top_region` site
+/// sits at the top stopper and its box reaches 10 cm up the shelf (see `under`).
 fn wine_rack(out: &mut String, p: &str) {
     let q_site = [0.8549119, -0.5187733, 0.0, 0.0];
     let site_pos = [0.0, -0.08003, 0.21745];
-    {
-        let mut g = geoms(out, p, [0.45, 0.30, 0.18, 1.0]);
-        frame_bits(&mut g);
-        // Base and two side frames.
-        g.bx([0.0, 0.0, 0.004], [0.1345, 0.127, 0.006], 0.05);
-        g.bx([0.128, 0.0, 0.165], [0.0065, 0.127, 0.004], 0.02);
-        g.bx([-0.128, 0.0, 0.165], [0.0065, 0.127, 0.004], 0.02);
-        for &x in &[0.128, -0.128] {
-            g.bx([x, 0.115, 0.165], [0.0065, 0.006, 0.163], 0.01);
-            g.bx([x, -0.115, 0.11], [0.0065, 0.006, 0.108], 0.01);
-        }
-        // The cradle: a plate just below the region site, plus a lip along its lower edge.
-        let below = qrot(q_site, [0.0, 0.0, -0.006]);
-        g.bx_rot(
-            [
-                site_pos[0] + below[0],
-                site_pos[1] + below[1],
-                site_pos[2] + below[2],
-            ],
-            q_site,
-            [0.1345, 0.05, 0.0035],
+    // (centre y, centre z, half [x, y, z], angle of the box's y axis above +y in degrees, mass)
+    let parts: [(f64, f64, [f64; 3], f64, f64); 9] = [
+        // Base plate, two splayed feet and a cross bar.
+        (0.0, 0.00657, [0.06646, 0.09302, 0.0045], 0.0, 0.04),
+        (0.06935, 0.01006, [0.08995, 0.06004, 0.00447], -7.48, 0.02),
+        (-0.0643, 0.01263, [0.08995, 0.06004, 0.00447], 8.04, 0.02),
+        (0.0, 0.0205, [0.09045, 0.0141, 0.0045], 0.0, 0.01),
+        // Post.
+        (0.00886, 0.17026, [0.00762, 0.00905, 0.16165], -15.84, 0.02),
+        // Shelves.
+        (
+            RACK_TOP_SHELF[0],
+            RACK_TOP_SHELF[1],
+            RACK_SHELF_HALF,
+            RACK_SHELF_DEG,
             0.02,
-        );
-        // Site +y runs down the slope (−62.5° about x), so the lower edge is at +y; the lip stands
-        // 4 cm down from the site so a bottle lying in the trough keeps its axis (and origin) within
-        // the region's ±0.022 across the slope.
-        let lip = qrot(q_site, [0.0, 0.04, 0.012]);
-        g.bx_rot(
-            [
-                site_pos[0] + lip[0],
-                site_pos[1] + lip[1],
-                site_pos[2] + lip[2],
-            ],
-            q_site,
-            [0.1345, 0.004, 0.015],
+        ),
+        (-0.04273, 0.12727, RACK_SHELF_HALF, RACK_SHELF_DEG, 0.02),
+        // Stoppers: thin plates standing across the shelves' lower edges.
+        (
+            RACK_TOP_STOPPER[0],
+            RACK_TOP_STOPPER[1],
+            RACK_STOPPER_HALF,
+            RACK_STOPPER_DEG,
             0.005,
-        );
-        // Cross bars holding the cradle.
-        g.bx([0.0, 0.115, 0.32], [0.128, 0.006, 0.006], 0.01);
-        g.bx([0.0, -0.115, 0.2], [0.128, 0.006, 0.006], 0.01);
+        ),
+        (
+            -0.10912,
+            0.09735,
+            RACK_STOPPER_HALF,
+            RACK_STOPPER_DEG,
+            0.005,
+        ),
+    ];
+    let mut g = geoms(out, p, [0.45, 0.30, 0.18, 1.0]);
+    frame_bits(&mut g);
+    for (y, z, half, deg, mass) in parts {
+        let a = deg.to_radians() / 2.0;
+        g.bx_rot([0.0, y, z], [a.cos(), a.sin(), 0.0, 0.0], half, mass);
     }
     site(
         out,
@@ -583,14 +636,6 @@ fn wine_rack(out: &mut String, p: &str) {
         q_site,
         [0.10087, 0.022, 0.00251],
     );
-}
-
-fn qrot(q: [f64; 4], v: [f64; 3]) -> [f64; 3] {
-    let r = qmul(
-        qmul(q, [0.0, v[0], v[1], v[2]]),
-        [q[0], -q[1], -q[2], -q[3]],
-    );
-    [r[1], r[2], r[3]]
 }
 
 /// Flat stove: 0.297 × 0.19 × 0.07 m; knob (hinge `button`, axis z) at the origin, burner at +0.15 x.

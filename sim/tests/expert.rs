@@ -48,6 +48,27 @@ fn a_libero_goal_task_succeeds_within_budget() {
     }
 }
 
+#[test]
+fn the_bottle_is_laid_in_the_rack_along_its_shelf() {
+    let spec = registry::resolve("libero_goal/put_the_wine_bottle_on_the_rack").unwrap();
+    let mut env = Env::from_task(&spec, state_only()).unwrap();
+    let r = sim::expert::run_episode_in(&mut env, &spec, 0, &ExpertConfig::default()).unwrap();
+    assert!(r.success, "{r:?}");
+    assert!(r.steps <= spec.max_steps, "{r:?}");
+    // Lying along the incline (31.3° up towards the rack's back), neck up, not across the shelf.
+    let scene = env.scene().unwrap();
+    let b = scene.instances[scene.instance("wine_bottle_1").unwrap()].root_body;
+    let q = env.data().body_quat(b);
+    let axis = [
+        2.0 * (q[1] * q[3] + q[0] * q[2]),
+        2.0 * (q[2] * q[3] - q[0] * q[1]),
+        1.0 - 2.0 * (q[1] * q[1] + q[2] * q[2]),
+    ];
+    let rise = sim::assets::wine_rack_top_shelf().incline[1];
+    assert!((axis[2] - rise).abs() < 0.05, "axis {axis:?}");
+    assert!(axis[0].abs() < 0.1, "axis {axis:?}");
+}
+
 /// Runs the expert on `task` from `seed` and returns the result and the final qpos of the scene's
 /// articulated joints (drawers top, middle, bottom, then the stove knob in LIBERO-Goal scenes).
 fn articulations_after(task: &str, seed: u64) -> (sim::expert::EpisodeResult, Vec<f64>) {

@@ -750,12 +750,14 @@ while let Some(action) = expert.act(&env, &obs) {             // None: demonstra
   tilted ~40° about the horizontal so it stays in front of the drawer above; it slides in around the
   bar's ends, pinches them and pulls 16 cm along the slide (moves hold that orientation). Stove: the
   fingers pinch the knob's pointer bar across its thickness and the wrist twists 0.75 rad.
-* **Wine rack.** The rack's `top_region` is a slab tilted 62.5°; the bottle lies along x in the trough
-  between the cradle plate and its lip, origin in the slab. The neck is taken from the side (hand
-  horizontal, pointing −y, fingers along x), the wrist rolls the bottle down to lie along x (fingers
-  now along z, so the pinch pivots about a vertical axis; it is carried rolled 20° short of level so
-  gravity keeps it pointing along x), above the trough the hand levels it and lowers it straight in
-  with the hand outside the rack's end frame.
+* **Wine rack.** The rack is a post with two shelves inclined 31° and a stopper along each lower edge
+  (LIBERO's collision model); `top_region` starts at the top stopper and reaches 10 cm up the shelf.
+  The bottle is laid on the top shelf beside the post, along the incline, neck up and bottom against
+  the stopper, as a wine rack holds bottles. The neck is pinched from above with the fingers closing
+  along the shelf: a pinch is a free pivot about the finger axis, so the bottle hangs upright while
+  carried, is set down on its bottom rim 4 cm up the shelf from the stopper, and the hand then carries
+  the neck up and along the incline in four waypoints: the bottle tips over about the pinch and lies
+  down, its bottom sliding down against the stopper. The fingers open sideways and the hand rises.
 * **Reach.** A straight arm is a singularity the OSC cannot leave: far out the expert first pulls in
   towards the shoulder before lifting and carries lower (unless another bowl stands near the way),
   comes down slower for far grasps, keeps pressing a far bottle down until it touches, pulls in again
@@ -777,20 +779,15 @@ while let Some(action) = expert.act(&env, &obs) {             // None: demonstra
 
 * `wooden_cabinet`: the drawer handles are 5 cm bars standing 2.5 cm proud of the drawer fronts on two
   posts (they stood 9 mm proud, too little for a fingertip; LIBERO's handles protrude similarly).
-* `wine_rack`: the cradle's lip stood at the upper edge of the tilted plate (site +y runs down the
-  slope), so nothing could rest in the cradle; it now stands 4 cm down the slope from the site, where
-  a lying bottle's origin stays within the region's ±0.022 across the slope.
+* `wine_rack`: the builtin rack is laid out as LIBERO's collision boxes (base, post, two 31° shelves,
+  1.4 cm stoppers). An earlier builtin rack put a cradle in the plane of the region site (tilted 62.5°),
+  which is not where LIBERO's shelf is and held a bottle only lying crosswise in a trough.
 * `flat_stove`: the knob joint is a light part (0.1 kg, inertia 2·10⁻⁴ kg·m², damping 0.02, armature
   5·10⁻⁴) instead of LIBERO's placeholder inertial (3 kg, 1 kg·m², damping 1), which no fingertip could
   turn by 0.5 rad within the budget. The `turn_on` threshold (q ≥ 0.5) is unchanged.
 
 ## Known limitations
 
-* `put_the_wine_bottle_on_the_rack` succeeds in about a third of the episodes. The hand must stay
-  outside the rack's end frame (x ≤ site − 0.17 m), which for racks drawn towards −x is at the edge of
-  what the arm reaches with the hand horizontal so close to its base (the move stalls); and a bottle
-  pinched at the neck turns freely about the pinch once levelled, so it sometimes lands across the
-  trough's end and rolls out after release.
 * `open_the_top_drawer_and_put_the_bowl_inside` runs close to its 300-step budget (open, take the bowl
   from under the open drawer, drop it in).
 * Long multi-object tasks (T7, T8) use most of their step budget (transport speed is bounded by OSC_POSE's

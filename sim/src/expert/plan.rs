@@ -234,7 +234,9 @@ impl<'a> Builder<'a> {
                         .parent
                         .is_some_and(|p| self.scene.instances[p].def.category == "wine_rack");
                     match cat {
-                        "wine_bottle" if on_rack => self.lay_in_rack(obj, site, n),
+                        "wine_bottle" if on_rack => {
+                            self.lay_in_rack(obj, r.parent.unwrap_or_default(), n)
+                        }
                         "plate" => self.push_to(obj, site, n),
                         "basket" => self.drag_basket(obj, site, n),
                         _ => {
@@ -1044,136 +1046,115 @@ impl<'a> Builder<'a> {
         out
     }
 
-    /// Lay a wine bottle into the rack's tilted cradle (the `top_region` slab is tilted 62.5° about x;
-    /// the bottle lies along x in the trough between the cradle plate and its lower lip, origin within
-    /// the slab). The neck is taken from the side with the hand horizontal (pointing −y, fingers
-    /// closing along x), the wrist rolls the bottle down to lie along x (fingers now along z: the
-    /// grasp pivots about the vertical, so gravity does not swing it), and the bottle is lowered into
-    /// the trough along its bisector with the hand outside the rack's side frame.
-    fn lay_in_rack(&mut self, obj: usize, site: usize, n: usize) {
-        use nalgebra::{Rotation3, Vector3};
-        use std::f64::consts::FRAC_PI_2;
+    /// Lay a wine bottle in the rack: on the top shelf (inclined 31.3°, rising towards the rack's
+    /// +y), along the incline with the neck up and the bottom against the stopper, beside the post,
+    /// the way a wine rack holds bottles. The neck is pinched from above with the fingers closing along
+    /// the shelf (the rack's x). A pinch is a free pivot about the finger axis, so the bottle hangs
+    /// upright while carried; it is set down on its bottom rim a few centimetres up the shelf from the
+    /// stopper, and the hand then carries the neck up and along the incline: the bottle tips over
+    /// about the pinch and lies down, its bottom sliding down against the stopper.
+    fn lay_in_rack(&mut self, obj: usize, rack: usize, n: usize) {
         if self.held.is_some() {
             self.release();
         }
-        let b = self.pos(obj);
+        let rb = self.scene.instances[rack].root_body;
+        let rp = self.env.data().body_pos(rb);
+        let rq = self.env.data().body_quat(rb);
+        // The top shelf in the rack's frame (y, z); the bottom face goes 2 mm up from the stopper.
+        let shelf = crate::assets::wine_rack_top_shelf();
+        let (p0, t, nrm) = (shelf.surface, shelf.incline, shelf.normal);
+        let radius = 0.0215;
+        let s_stop = shelf.stopper + 0.002;
         let gh = BOTTLE_NECK + self.jit(0.004);
-        let neck = [b[0] + self.jit(0.002), b[1], b[2] + gh];
-        let c = self.env.data().site_pos(site);
-        let m = self.env.data().site_mat(site);
-        // Site axes in the world: y down the slope, z the slab's normal.
-        let sy = [m[1], m[4], m[7]];
-        let sz = [m[2], m[5], m[8]];
-        // Bottom centre: 1.45 cm down the slope from the site, 2.4 cm off the plate, 5 cm towards
-        // the robot along x; the neck (and the hand) then sits outside the cradle's end.
-        let along = 0.0145;
-        let up = 0.024;
-        let dx = -0.038 + self.jit(0.003);
-        let tb = [
-            c[0] + along * sy[0] + up * sz[0] + dx,
-            c[1] + along * sy[1] + up * sz[1],
-            c[2] + along * sy[2] + up * sz[2],
-        ];
-        let g = [tb[0] - gh, tb[1], tb[2]];
-        let g_pre = [g[0], g[1], g[2] + 0.08];
-        let high = g_pre[2].max(1.28);
-        let mat = |r: Rotation3<f64>| -> [f64; 9] {
-            let m = r.into_inner();
-            [
-                m[(0, 0)],
-                m[(0, 1)],
-                m[(0, 2)],
-                m[(1, 0)],
-                m[(1, 1)],
-                m[(1, 2)],
-                m[(2, 0)],
-                m[(2, 1)],
-                m[(2, 2)],
-            ]
+        // Beside the post (x = 0), on the side nearer the bottle, clear of the opening fingers.
+        let b = self.pos(obj);
+        let ex = qrot(rq, [1.0, 0.0, 0.0]);
+        let side = if (b[0] - rp[0]) * ex[0] + (b[1] - rp[1]) * ex[1] >= 0.0 {
+            1.0
+        } else {
+            -1.0
         };
-        let rz = Rotation3::from_axis_angle(&Vector3::z_axis(), FRAC_PI_2);
-        let rx = Rotation3::from_axis_angle(&Vector3::x_axis(), -FRAC_PI_2);
-        let ry = Rotation3::from_axis_angle(&Vector3::y_axis(), -FRAC_PI_2);
-        // Carried rolled 20° short of level: the pinch axis leans towards +x, so gravity holds the
-        // bottle pointing +x (20° down) instead of leaving it free to turn about a vertical axis.
-        let ry_carry = Rotation3::from_axis_angle(&Vector3::y_axis(), -FRAC_PI_2 + 0.35);
+        let x = side * (0.06 + self.jit(0.005));
+        // Fingers closing along the rack's x: yaw 0 closes them along world y.
+        let yaw = wrap_half_turn(ex[1].atan2(ex[0]) - std::f64::consts::FRAC_PI_2);
+        // The pinch when the bottle's axis is at `beta` from the shelf normal (tilted up the shelf)
+        // and its bottom rim touches the shelf at `s`, lifted `lift` off it along the normal.
+        let pinch = |beta: f64, s: f64, lift: f64| -> [f64; 3] {
+            let (cb, sb) = (beta.cos(), beta.sin());
+            let ax = [cb * nrm[0] + sb * t[0], cb * nrm[1] + sb * t[1]];
+            let k = |j: usize| {
+                p0[j] + s * t[j] - radius * cb * t[j] + (radius * sb + lift) * nrm[j] + gh * ax[j]
+            };
+            add(rp, qrot(rq, [x, k(0), k(1)]))
+        };
+        let upright = (t[1] / t[0]).atan().abs(); // the vertical, at 31.3° from the normal
+        let s_touch = s_stop + 0.04 + self.jit(0.004);
+        let touch = pinch(upright, s_touch, 0.0);
+        let above = [touch[0], touch[1], touch[2] + 0.03];
+
+        // Take the neck from above.
         self.ops.push(Op::Grip {
             cmd: OPEN,
             steps: 0,
         });
-        // Hand horizontal, pointing −y, fingers closing along x.
-        self.yaw = FRAC_PI_2;
-        self.ops.push(Op::Attitude {
-            rot: mat(rx * rz),
-            grip: OPEN,
-            max: 0,
-            hold: true,
-        });
-        self.mv(
-            Target::Grip(Point::Abs([neck[0], neck[1] + 0.11, neck[2] + 0.02])),
-            0.015,
-            80,
-            12.0,
-        );
-        self.ops.push(Op::Attitude {
-            rot: mat(rx * rz),
-            grip: OPEN,
-            max: 20,
-            hold: true,
-        });
+        if (yaw - self.yaw).abs() > 1e-6 {
+            self.yaw = yaw;
+            self.ops.push(Op::Yaw {
+                yaw,
+                grip: OPEN,
+                max: 25,
+            });
+        }
+        let neck = |dz: f64| Point::Body {
+            inst: obj,
+            off: [0.0, 0.0, gh + dz],
+            local: false,
+        };
+        self.mv(Target::Grip(neck(0.08)), 0.02, 90, 12.0);
         self.pause(OPEN);
-        self.mv(Target::Grip(Point::Abs(neck)), 0.004, 40, 10.0);
+        self.mv(Target::Grip(neck(0.0)), 0.005, 40, 13.0);
         self.ops.push(Op::Grip {
             cmd: CLOSE,
             steps: 12,
         });
         self.held = Some(obj);
-        self.mv(Target::Rel([0.0, 0.0, 0.05]), 0.01, 30, 12.0);
-        // Roll about the pointing axis while rising: the bottle comes down to lie along x, bottom
-        // towards +x.
-        self.ops.push(Op::Attitude {
-            rot: mat(ry_carry * rx * rz),
-            grip: CLOSE,
-            max: 0,
-            hold: true,
-        });
-        // Held by the neck the bottle turns freely about the vertical (a point pinch has no torsional
-        // friction) and its centre of mass is 6 cm out: move gently, over the rack's frame, x first.
-        self.mv(Target::RelZ(high), 0.015, 40, 8.0);
-        self.ops.push(Op::Attitude {
-            rot: mat(ry_carry * rx * rz),
-            grip: CLOSE,
-            max: 20,
-            hold: true,
-        });
+        // Up, over to above the touch-down point (the bottle hangs upright below the pinch), down.
+        let high = (above[2] + 0.02).max(b[2] + gh + 0.1);
+        self.mv(Target::RelZ(high), 0.015, 40, 12.0);
         self.mv(
-            Target::Grip(Point::Abs([g_pre[0], g_pre[1], high])),
+            Target::Grip(Point::Abs([above[0], above[1], high])),
             0.012,
             90,
-            8.0,
+            9.0,
         );
-        self.mv(Target::Grip(Point::Abs(g_pre)), 0.008, 50, 8.0);
-        // Level it over the trough (the hand is still, so it keeps pointing along x), then straight
-        // down into it (sideways motion would turn it).
-        self.ops.push(Op::Attitude {
-            rot: mat(ry * rx * rz),
-            grip: CLOSE,
-            max: 20,
-            hold: true,
-        });
-        self.mv(Target::Grip(Point::Abs(g)), 0.004, 40, 6.0);
-        self.ops.push(Op::WaitSatisfied {
-            n,
-            max: 30,
-            grip: CLOSE,
-        });
+        self.mv(Target::Grip(Point::Abs(above)), 0.01, 40, 10.0);
+        self.mv(Target::Grip(Point::Abs(touch)), 0.006, 20, 10.0);
+        // Tip it over up the shelf: the rim slides down to the stopper as the neck goes up the
+        // incline and down, until the bottle lies along it (axis at 90° from the normal).
+        let k_max = 4;
+        for k in 1..=k_max {
+            let f = k as f64 / k_max as f64;
+            let beta = upright + f * (std::f64::consts::FRAC_PI_2 - upright);
+            let s = s_touch + f * (s_stop - s_touch);
+            let w = pinch(beta, s, 0.003);
+            if k == k_max {
+                self.mv(Target::Grip(Point::Abs(w)), 0.005, 30, 10.0);
+            } else {
+                self.mv(Target::Grip(Point::Abs(w)), 0.01, 15, 12.0);
+            }
+        }
         self.ops.push(Op::Grip {
             cmd: OPEN,
             steps: 10,
         });
         self.held = None;
-        // Back out along the hand's axis, then up.
-        self.mv(Target::Rel([0.0, 0.08, 0.0]), 0.015, 30, 12.0);
+        self.ops.push(Op::WaitSatisfied {
+            n,
+            max: 25,
+            grip: OPEN,
+        });
+        // Straight up: the open fingers leave the neck sideways.
+        self.mv(Target::Rel([0.0, 0.0, 0.08]), 0.015, 30, 12.0);
     }
 
     /// Turn a stove knob on: pinch its pointer bar across its thickness with the hand yawed along the
