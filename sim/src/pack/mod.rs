@@ -195,12 +195,7 @@ pub fn libero_tasks(pack: &LiberoPack) -> Result<Vec<LiberoTask>, crate::task::T
             .collect();
         files.sort();
         for path in files {
-            let text =
-                std::fs::read_to_string(&path).map_err(|source| crate::task::TaskError::Io {
-                    path: path.display().to_string(),
-                    source,
-                })?;
-            let problem = crate::task::parse_named(&path.display().to_string(), &text)?;
+            let (_, problem) = crate::task::registry::read_bddl(&path)?;
             let stem = path
                 .file_stem()
                 .and_then(|s| s.to_str())

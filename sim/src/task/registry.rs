@@ -514,17 +514,8 @@ fn load_pack_task(suite: Suite, stem: &str, asked: &str) -> Result<TaskSpec, Tas
             ),
         });
     }
-    let text = std::fs::read_to_string(&path).map_err(|source| TaskError::Io {
-        path: path.display().to_string(),
-        source,
-    })?;
-    let problem = bddl::parse_named(&path.display().to_string(), &text)?;
-    let goal_len = GoalTracker::new(&problem)
-        .map_err(|source| TaskError::Goal {
-            id: asked.to_string(),
-            source,
-        })?
-        .goal_len();
+    let (text, problem) = read_bddl(&path)?;
+    let goal_len = checked_goal_len(&problem, asked)?;
     let task_language = language_from_file_stem(stem);
     Ok(TaskSpec {
         id: format!("{}/{stem}", suite.as_str()),
@@ -541,19 +532,31 @@ fn load_pack_task(suite: Suite, stem: &str, asked: &str) -> Result<TaskSpec, Tas
     })
 }
 
-/// Loads a user's BDDL file.
-fn load_user(path: &str) -> Result<TaskSpec, TaskError> {
+/// Reads and parses a BDDL file; errors name the file (and, for parse errors, the line).
+pub(crate) fn read_bddl(path: &Path) -> Result<(String, Problem), TaskError> {
+    let name = path.display().to_string();
     let text = std::fs::read_to_string(path).map_err(|source| TaskError::Io {
-        path: path.to_string(),
+        path: name.clone(),
         source,
     })?;
-    let problem = bddl::parse_named(path, &text)?;
-    let goal_len = GoalTracker::new(&problem)
+    let problem = bddl::parse_named(&name, &text)?;
+    Ok((text, problem))
+}
+
+/// The goal length of a parsed task, checking that the goal tracker accepts its goal.
+fn checked_goal_len(problem: &Problem, id: &str) -> Result<usize, TaskError> {
+    Ok(GoalTracker::new(problem)
         .map_err(|source| TaskError::Goal {
-            id: path.to_string(),
+            id: id.to_string(),
             source,
         })?
-        .goal_len();
+        .goal_len())
+}
+
+/// Loads a user's BDDL file.
+fn load_user(path: &str) -> Result<TaskSpec, TaskError> {
+    let (text, problem) = read_bddl(Path::new(path))?;
+    let goal_len = checked_goal_len(&problem, path)?;
     let stem = Path::new(path)
         .file_stem()
         .and_then(|s| s.to_str())
