@@ -43,7 +43,7 @@ fn generate_train_eval_t1() {
     // 3. Evaluate 2 rollouts of the checkpoint, recorded, with slot overlays of the first.
     let run = eval::RunDir::open(&run_dir).unwrap();
     assert_eq!(run.step, 120);
-    let device = train::backend::device(run.config.backend.kind).unwrap();
+    let device = eval::run::device(&run).unwrap();
     let out = tmp.path().join("eval");
     let eval_cfg = eval::EvalConfig {
         episodes: 2,
@@ -54,8 +54,9 @@ fn generate_train_eval_t1() {
         viz_every: 50,
         ..Default::default()
     };
-    let make =
-        || -> Result<Box<dyn eval::Policy>, eval::EvalError> { Ok(Box::new(run.policy(&device)?)) };
+    let make = || -> Result<Box<dyn eval::Policy>, eval::EvalError> {
+        Ok(Box::new(eval::run::policy(&run, &device)?))
+    };
     let tasks = eval::resolve_tasks("t1", None).unwrap();
     let mut results = eval::evaluate(&tasks, &make, &eval_cfg, &|_| {}).unwrap();
     results.policy = "model".into();

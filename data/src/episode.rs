@@ -397,7 +397,7 @@ impl EpisodeWriter {
             .into_inner()
             .map_err(|e| DataError::io(&path, e.into_error()))?;
         file.sync_all().map_err(|e| DataError::io(&path, e))?;
-        crate::index::set_readable(&file, &path)?;
+        crate::fsio::set_readable(&file, &path)?;
         drop(file);
         self.tmp_path
             .persist(&path)

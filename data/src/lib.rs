@@ -38,6 +38,7 @@ pub mod bench;
 pub mod episode;
 pub mod error;
 pub mod example;
+pub mod fsio;
 pub mod imageio;
 pub mod index;
 pub mod rlds;

@@ -17,7 +17,7 @@ use crate::episode::EpisodeReader;
 use crate::error::{DataError, Result};
 use crate::imageio::resize_rgb;
 use crate::index::{DatasetIndex, Split, Stats};
-use crate::schema::{ObjectAnnotation, RgbImage};
+use crate::schema::{GoalProgress, ObjectAnnotation, RgbImage};
 
 /// Seeded photometric and geometric augmentation, applied identically to all frames of a window.
 #[derive(Clone, Debug, PartialEq)]
@@ -92,8 +92,10 @@ impl WindowConfig {
     }
 }
 
-/// q01/q99 action normalisation (OpenVLA BOUNDS_Q99, model.md §8).
-#[derive(Clone, Debug, PartialEq)]
+/// q01/q99 action normalisation (OpenVLA BOUNDS_Q99, model.md §8), with the mask of the
+/// normalised dimensions. The one implementation: training targets and the policy's outputs
+/// (through `model::io::Processor`) use it.
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct ActionNorm {
     /// 1st percentiles.
     pub q01: [f32; 7],
@@ -172,8 +174,9 @@ pub struct WindowSample {
     pub states: Vec<f32>,
     /// The instruction.
     pub instruction: String,
-    /// `[T]` current subgoal text per frame.
-    pub subgoals: Vec<String>,
+    /// `[T]` goal progress as the policy observes it at each frame: before that frame's action
+    /// (see [`observed_progress`]), as an environment reports it with the frame.
+    pub goals: Vec<GoalProgress>,
     /// `[T]` object annotations per frame.
     pub objects: Vec<Vec<ObjectAnnotation>>,
 }
@@ -303,7 +306,11 @@ impl WindowDataset {
         let lo = frame_steps[0];
         let hi = frame_steps[tl - 1];
         let last = (hi + c.chunk - 1).min(n - 1);
-        let raw = r.read_raw_steps(lo..last + 1)?;
+        // One step before the window too: the progress a frame observes is its predecessor's.
+        let first = lo.saturating_sub(1);
+        let all = r.read_raw_steps(first..last + 1)?;
+        let before = (lo > first).then(|| all[0].progress.clone());
+        let raw = &all[lo - first..];
 
         let mut rng = ChaCha8Rng::seed_from_u64(mix(c.seed ^ mix(epoch ^ mix(i as u64))));
         let aug = c.augment.as_ref().map(|a| AugParams::draw(a, &mut rng));
@@ -357,9 +364,16 @@ impl WindowDataset {
             action_mask,
             states,
             instruction: r.meta().instruction.clone(),
-            subgoals: frame_steps
+            goals: frame_steps
                 .iter()
-                .map(|&f| raw[f - lo].progress.current_subgoal.clone())
+                .map(|&f| {
+                    let previous = if f == lo {
+                        before.as_ref()
+                    } else {
+                        Some(&raw[f - 1 - lo].progress)
+                    };
+                    observed_progress(previous, &raw[f - lo].progress)
+                })
                 .collect(),
             objects: frame_steps
                 .iter()
@@ -368,6 +382,34 @@ impl WindowDataset {
             frame_steps,
         })
     }
+}
+
+/// The goal progress a policy observes at a step: the progress recorded at the step before
+/// (episodes record each step's progress *after* its action, an environment reports it with the
+/// next observation). At step 0 (`previous` = None) it is the reset's: nothing satisfied, the
+/// first subgoal pending (taken from the recorded progress, which rarely has moved by then).
+pub fn observed_progress(previous: Option<&GoalProgress>, current: &GoalProgress) -> GoalProgress {
+    match previous {
+        Some(p) => p.clone(),
+        None if current.satisfied == 0 => current.clone(),
+        None => GoalProgress {
+            satisfied: 0,
+            total: current.total,
+            satisfied_subgoals: Vec::new(),
+            current_subgoal: current
+                .satisfied_subgoals
+                .first()
+                .cloned()
+                .unwrap_or_default(),
+        },
+    }
+}
+
+/// An upright RGB frame as a policy input: resized to `size`² (the `image` crate's filter, see
+/// [`resize_rgb`]) and laid out `[3, size, size]` in [0, 1]. Training windows (without
+/// augmentation) and the streaming policy both go through it.
+pub fn frame_chw(img: RgbImage, size: u32) -> Vec<f32> {
+    to_chw(&resize_rgb(img, size, size), None)
 }
 
 /// Augmentation parameters drawn once per window.

@@ -100,7 +100,10 @@ fn edge_frames_are_repeated_with_mask() {
         &[true, true, false, true, false, false]
     );
     assert_eq!(&s.states[3 * 8..4 * 8], &eps[0][9].state);
-    assert_eq!(s.subgoals[0], eps[0][6].progress.current_subgoal);
+    // The goal a frame observes is the one recorded with the step before it (recorded after
+    // that step's action): frame 6 sees step 5's progress.
+    assert_eq!(s.goals[0], eps[0][5].progress);
+    assert_eq!(s.goals[3], eps[0][8].progress);
     assert_eq!(s.objects[3], eps[0][9].objects);
     // gripper untouched by normalisation
     assert_eq!(chunk(0, 0)[6], eps[0][6].action[6]);
@@ -109,6 +112,32 @@ fn edge_frames_are_repeated_with_mask() {
     assert_eq!((s.episode, s.t), (1, 4));
     assert_eq!(s.frame_steps, vec![1, 2, 3, 4, 5, 6]);
     assert!(s.frame_mask.iter().all(|m| *m));
+    assert_eq!(s.goals[1], eps[1][1].progress);
+    // Step 0 observes the reset's progress: nothing satisfied yet.
+    let s = ds.get(10).unwrap();
+    assert_eq!(s.frame_steps[..3], [0, 0, 0]);
+    assert_eq!(s.goals[0].satisfied, 0);
+    assert!(s.goals[0].satisfied_subgoals.is_empty());
+}
+
+#[test]
+fn observed_progress_at_step_zero_undoes_an_early_satisfaction() {
+    use data::window::observed_progress;
+    let after = GoalProgress {
+        satisfied: 1,
+        total: 3,
+        satisfied_subgoals: vec!["one: bowl 1 on plate 1".into()],
+        current_subgoal: "bowl 2 on plate 1".into(),
+    };
+    let seen = observed_progress(None, &after);
+    assert_eq!(seen.satisfied, 0);
+    assert_eq!(seen.total, 3);
+    assert!(seen.satisfied_subgoals.is_empty());
+    assert_eq!(seen.current_subgoal, "one: bowl 1 on plate 1");
+    assert_eq!(
+        observed_progress(Some(&after), &GoalProgress::default()),
+        after
+    );
 }
 
 #[test]

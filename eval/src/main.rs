@@ -169,7 +169,7 @@ fn setup(args: &EvalArgs) -> anyhow::Result<Setup> {
         }
     };
     let run = match (kind, &args.run) {
-        (PolicyKind::Model, Some(dir)) => Some(RunDir::open(dir)?),
+        (PolicyKind::Model, Some(dir)) => Some(eval::run::open(dir)?),
         (PolicyKind::Model, None) => {
             return Err(
                 EvalError::Argument("`--policy model` needs `--run runs/NAME`".into()).into(),
@@ -181,13 +181,12 @@ fn setup(args: &EvalArgs) -> anyhow::Result<Setup> {
         return Err(EvalError::Argument("--viz needs the model policy (`--run`)".into()).into());
     }
     let device = match &run {
-        Some(r) => train::backend::device(r.config.backend.kind)
-            .map_err(|e| EvalError::Argument(e.to_string()))?,
+        Some(r) => eval::run::device(r)?,
         None => burn::prelude::Device::flex(),
     };
     let tasks = match (&args.tasks, &run) {
         (Some(t), _) => t.clone(),
-        (None, Some(r)) if !r.config.eval.tasks.is_empty() => r.config.eval.tasks.join(","),
+        (None, Some(r)) if !r.info.eval_tasks.is_empty() => r.info.eval_tasks.join(","),
         _ => "libero_mem".to_string(),
     };
     let out = match (&args.out, &run) {
@@ -206,12 +205,12 @@ fn setup(args: &EvalArgs) -> anyhow::Result<Setup> {
 
 fn make_policy(s: &Setup) -> Result<Box<dyn Policy>, EvalError> {
     Ok(match s.kind {
-        PolicyKind::Model => Box::new(
+        PolicyKind::Model => Box::new(eval::run::policy(
             s.run
                 .as_ref()
-                .ok_or_else(|| EvalError::Argument("no run".into()))?
-                .policy(&s.device)?,
-        ),
+                .ok_or_else(|| EvalError::Argument("no run".into()))?,
+            &s.device,
+        )?),
         PolicyKind::Expert => Box::new(eval::ExpertPolicy::default()),
         PolicyKind::Random => Box::new(eval::RandomPolicy::default()),
         PolicyKind::Zero => Box::new(eval::ZeroPolicy),

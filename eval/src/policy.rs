@@ -2,11 +2,12 @@
 //! expert and the two floors (zero and random actions).
 
 use burn::prelude::Device;
+use data::GoalProgress;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use sim::expert::Expert;
 use sim::task::TaskSpec;
-use sim::{Env, Observation};
+use sim::{Env, GoalStatus, Observation};
 
 use crate::EvalError;
 
@@ -97,49 +98,80 @@ impl Policy for ExpertPolicy {
     }
 }
 
-/// A trained model run step by step: each step the agentview frame (resized to the model's input
-/// as the data pipeline resizes training frames), the task instruction and, for
-/// `e_slotssm` with `oracle_subgoal`, the goal tracker's pending subgoal go in; the first action of
-/// the predicted chunk comes out, un-normalised with the run's action statistics, clamped to
-/// [−1, 1], with the gripper binarised by its sign (as upstream `mem_6`).
+/// A trained model run step by step through the policy's one input path
+/// ([`model::Processor`], saved with the run): each step the agentview frame, the instruction
+/// and the goal progress the environment reports go in (the processor decides what the variant
+/// reads of them, exactly as in training); the first action of the predicted chunk comes out,
+/// un-normalised by the processor, clamped to [−1, 1], with the gripper binarised by its sign
+/// (as upstream `mem_6`).
 pub struct ModelPolicy {
     policy: model::StreamingPolicy,
+    processor: model::Processor,
     instruction: String,
-    oracle_subgoal: bool,
-    grid: (usize, usize),
+    grid: [usize; 2],
 }
 
 impl ModelPolicy {
-    /// Wraps a loaded model with the run's action statistics.
+    /// Wraps a loaded model with its run's processor.
     pub fn new(
         model: model::PolicyModel,
-        stats: model::ActionStats,
+        processor: model::Processor,
         device: &Device,
     ) -> Result<Self, EvalError> {
-        let cfg = &model.config;
-        let oracle_subgoal = matches!(
-            cfg.variant,
-            model::Variant::ESlotSsm {
-                oracle_subgoal: true
-            }
-        );
-        let stride: usize = cfg.encoder.strides.iter().product::<usize>().max(1);
-        let grid = (cfg.image_size[0] / stride, cfg.image_size[1] / stride);
-        let policy = model::StreamingPolicy::new(model, device)
-            .map_err(|e| EvalError::Model(e.to_string()))?
-            .with_action_stats(stats);
+        processor.check_model(&model.config)?;
+        let grid = model.config.grid();
+        let policy = model::StreamingPolicy::new(model, device)?;
         Ok(ModelPolicy {
             policy,
+            processor,
             instruction: String::new(),
-            oracle_subgoal,
             grid,
         })
     }
 
-    /// Whether the pending subgoal text is fed to the model.
+    /// Whether the oracle subgoal is fed to the model.
     pub fn uses_oracle_subgoal(&self) -> bool {
-        self.oracle_subgoal
+        self.processor.config().subgoal != model::io::SubgoalInput::None
     }
+}
+
+/// The goal progress of an observation in the episode files' terms (what the recorder writes).
+pub fn goal_progress(g: &GoalStatus) -> GoalProgress {
+    GoalProgress {
+        satisfied: g.satisfied as u32,
+        total: g.goal_len as u32,
+        satisfied_subgoals: g.satisfied_texts.clone(),
+        current_subgoal: g.pending.clone().unwrap_or_default(),
+    }
+}
+
+/// Eval's input path: one simulator observation → the model's inputs, through `processor`.
+pub fn model_input(
+    processor: &model::Processor,
+    instruction: &str,
+    obs: &Observation,
+    device: &Device,
+) -> Result<model::StepInput, EvalError> {
+    let s = obs.image_size as u32;
+    if s == 0 || obs.agentview_rgb.len() != (s * s * 3) as usize {
+        return Err(EvalError::Model(
+            "the model needs rendered agentview frames".into(),
+        ));
+    }
+    let frame = data::RgbImage {
+        width: s,
+        height: s,
+        channels: 3,
+        data: obs.agentview_rgb.clone(),
+    };
+    let goal = obs.goal.as_ref().map(goal_progress);
+    let step = model::StepObservation {
+        agentview: &frame,
+        state: obs.state,
+        instruction,
+        goal: goal.as_ref(),
+    };
+    Ok(processor.step(&step, device)?)
 }
 
 /// Post-processes one un-normalised action: dims 0–5 clamped to [−1, 1], gripper to ±1 by sign.
@@ -164,45 +196,18 @@ impl Policy for ModelPolicy {
     }
 
     fn act(&mut self, _: &Env, obs: &Observation) -> Result<[f32; 7], EvalError> {
-        let s = obs.image_size as u32;
-        if s == 0 || obs.agentview_rgb.len() != (s * s * 3) as usize {
-            return Err(EvalError::Model(
-                "the model needs rendered agentview frames".into(),
-            ));
-        }
-        let [h, w] = self.policy.model().config.image_size;
-        let frame = data::imageio::resize_rgb(
-            data::RgbImage {
-                width: s,
-                height: s,
-                channels: 3,
-                data: obs.agentview_rgb.clone(),
-            },
-            w as u32,
-            h as u32,
-        );
-        let input = model::Observation {
-            rgb: &frame.data,
-            height: frame.height as usize,
-            width: frame.width as usize,
-            wrist_rgb: None,
-            state: Some(obs.state),
-        };
-        let subgoal = self.oracle_subgoal.then(|| {
-            obs.goal
-                .as_ref()
-                .and_then(|g| g.pending.clone())
-                .unwrap_or_default()
-        });
-        let chunk = self
-            .policy
-            .act(&input, &self.instruction, subgoal.as_deref())
-            .map_err(|e| EvalError::Model(e.to_string()))?;
-        let first = chunk
+        let input = model_input(
+            &self.processor,
+            &self.instruction,
+            obs,
+            self.policy.device(),
+        )?;
+        let chunk = self.policy.act_input(input)?;
+        let first: [f32; 7] = chunk
             .first()
-            .copied()
-            .ok_or_else(|| EvalError::Model("the model returned an empty action chunk".into()))?;
-        Ok(finish_action(first))
+            .and_then(|a| a.as_slice().try_into().ok())
+            .ok_or_else(|| EvalError::Model("the model returned no 7-D action".into()))?;
+        Ok(finish_action(self.processor.unnormalize(first)))
     }
 
     fn needs_images(&self) -> bool {
@@ -211,7 +216,7 @@ impl Policy for ModelPolicy {
 
     fn slot_masks(&self) -> Option<(Vec<Vec<f32>>, usize, usize)> {
         let masks = self.policy.last_masks()?;
-        let (rows, cols) = self.grid;
+        let [rows, cols] = self.grid;
         (masks.first()?.len() == rows * cols).then_some((masks, rows, cols))
     }
 }

@@ -71,25 +71,20 @@ fn no_policy_and_model_without_run_are_exit_2() {
     assert!(err.contains("--viz needs the model policy"), "{err}");
 }
 
-/// A run directory as `train` writes it, without checkpoints yet.
+/// A run directory as `train` writes it (the run contract of `model::run`), without
+/// checkpoints yet.
 fn bare_run(dir: &Path) -> model::ModelConfig {
-    std::fs::create_dir_all(dir).unwrap();
-    let cfg_path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../configs/tiny.toml");
-    std::fs::copy(&cfg_path, dir.join("config.toml")).unwrap();
     let model = model::ModelConfig::tiny(model::Variant::ESlotSsm {
         oracle_subgoal: false,
     })
     .with_vocab_from(["put the bowl on the plate"]);
-    std::fs::write(
-        dir.join("model.json"),
-        serde_json::to_string(&model).unwrap(),
-    )
-    .unwrap();
-    std::fs::write(
-        dir.join("action_stats.json"),
-        r#"{"q01":[-1,-1,-1,-1,-1,-1,-1],"q99":[1,1,1,1,1,1,1],"mask":[true,true,true,true,true,true,false]}"#,
-    )
-    .unwrap();
+    let norm = data::ActionNorm {
+        q01: [-1.0; 7],
+        q99: [1.0; 7],
+        mask: [true, true, true, true, true, true, false],
+    };
+    let info = model::run::RunInfo::new(Default::default(), vec!["t1".into()]);
+    model::run::write_policy(dir, &info, &model, &model::Processor::new(&model, norm)).unwrap();
     model
 }
 
@@ -118,11 +113,7 @@ fn checkpoint_of_another_model_is_exit_2() {
         ..model
     };
     let state = serde_json::json!({
-        "format": train::checkpoint::STATE_FORMAT,
         "step": 10,
-        "sampler": train::dataset::Sampler::new(0, 4),
-        "rng_seed": 0,
-        "elapsed_s": 1.0,
         "model": other,
     });
     std::fs::write(ck.join("state.json"), state.to_string()).unwrap();

@@ -84,6 +84,16 @@ impl Variant {
         !matches!(self, Variant::Dense { .. })
     }
 
+    /// Whether the variant reads the oracle subgoal text with every frame.
+    pub fn needs_subgoal_text(&self) -> bool {
+        matches!(
+            self,
+            Variant::ESlotSsm {
+                oracle_subgoal: true
+            }
+        )
+    }
+
     /// Whether the variant has the SlotSSM, windowed head and slot fusion.
     pub fn has_ssm(&self) -> bool {
         matches!(self, Variant::ESlotSsm { .. })
@@ -370,7 +380,7 @@ impl ModelConfig {
 
     /// Replaces the vocabulary by the words of `texts` (lower-cased, sorted, unique).
     pub fn with_vocab_from<'a>(mut self, texts: impl IntoIterator<Item = &'a str>) -> Self {
-        let mut words: Vec<String> = texts.into_iter().flat_map(crate::text::words).collect();
+        let mut words: Vec<String> = texts.into_iter().flat_map(data::text::words).collect();
         words.sort();
         words.dedup();
         self.text.vocab = words;

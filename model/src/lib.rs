@@ -4,7 +4,8 @@
 //! Layout follows `../shared/spec/model.md`: [`encoder`] (§1), [`slot_attention`] (§2),
 //! [`losses`] (§3, §5, §8), [`mamba`] and [`slot_ssm`] (§4), [`heads`] (§5 windowed head,
 //! §6 slot fusion, the L_sa decoder), [`relation`] (§7), [`text`] and [`decoder`] (§8),
-//! [`policy`] (§9, the variants and the window forward) and [`streaming`] (§10).
+//! [`variants`] and [`policy`] (§9, the variants as types and the shared window forward) and
+//! [`streaming`] (§10).
 //! Model code has no backend parameter: the backend is chosen at run time by the
 //! [`burn::prelude::Device`] (flex or ndarray on CPU; wgpu with this crate's `wgpu` feature).
 //!
@@ -16,36 +17,47 @@
 //! let (out, losses) = model.forward(&WindowBatch { images, actions, frame_mask, .. })?;
 //! let grads = losses.total.backward();           // λ-weighted sum of the terms
 //! ```
+//! Inputs are prepared by one [`io::Processor`] for training (`Processor::batch` over `data`'s
+//! window samples) and evaluation (`Processor::step` per observation); [`run`] reads and writes
+//! the run directory (model, processor, checkpoints) that both share.
+//!
 //! Evaluation (per environment step):
 //! ```text
-//! let mut policy = StreamingPolicy::new(PolicyModel::load(&cfg, path, &device)?, &device)?;
+//! let run = RunDir::open("runs/t3")?;
+//! let mut policy = StreamingPolicy::new(run.load_model(&device)?, &device)?;
 //! policy.reset();
-//! let chunk: Vec<[f32; 7]> = policy.act(&observation, instruction, subgoal)?;   // [H_a][7]
-//! policy.observe(&next_observation, subgoal)?;    // memory update only, while executing a chunk
+//! let input = run.processor.step(&StepObservation { agentview, state, instruction, goal }, &device)?;
+//! let chunk = policy.act_input(input)?;                  // [H_a][7], normalised
+//! let action = run.processor.unnormalize(chunk[0]);
 //! ```
 
 #![warn(missing_docs)]
 
+pub mod backend;
 pub mod blocks;
 pub mod config;
 pub mod decoder;
 pub mod encoder;
 pub mod error;
 pub mod heads;
+pub mod io;
 pub mod losses;
 pub mod mamba;
 pub mod policy;
 pub mod relation;
+pub mod run;
 pub mod slot_attention;
 pub mod slot_ssm;
 pub mod streaming;
 pub mod text;
+pub mod variants;
 
 pub use config::{ModelConfig, Variant};
 pub use error::{ModelError, Result};
+pub use io::{Processor, StepInput, StepObservation, Tokenizer};
 pub use policy::{Carry, Losses, PolicyModel, WindowBatch, WindowOutput};
-pub use streaming::{ActionStats, Observation, StreamingPolicy};
-pub use text::Tokenizer;
+pub use run::RunDir;
+pub use streaming::StreamingPolicy;
 
 /// The CPU device of the unit tests (flex, pure Rust), seeded with 0.
 ///

@@ -1,27 +1,22 @@
-//! The policy model of every variant (model.md §9) and its training forward over windows.
-//!
-//! `e_slotssm`: encoder → slot attention → SlotSSM → windowed head and slot fusion → relation
-//! tokens → decoder. `slotvla_h<N>`: encoder → slot attention → z = Linear(s) → relation tokens;
-//! the decoder sees the tokens of the last N frames. `dense`: the decoder sees projected patch
-//! tokens. One interface for all, so trainer and evaluator do not care which.
+//! The policy model of every variant (model.md §9) and its training forward over windows: the
+//! shared encoder, language embeddings and action decoder around the variant's token builder
+//! ([`crate::variants`]: `e_slotssm`, `slotvla_h<N>`, `dense`). One interface for all, so trainer
+//! and evaluator do not care which.
 
 use std::path::Path;
 
 use burn::module::Param;
-use burn::nn::{Linear, LinearConfig};
 use burn::prelude::*;
 use burn::tensor::Distribution;
 
-use crate::config::{ActionHead, ModelConfig, Variant};
+use crate::config::{ActionHead, ModelConfig};
 use crate::decoder::{ActionDecoder, DecoderOutput};
 use crate::encoder::VisualEncoder;
 use crate::error::{ModelError, Result};
-use crate::heads::{SlotDecoder, SlotFusion, WindowHead};
 use crate::losses;
-use crate::relation::RelationEncoder;
-use crate::slot_attention::SlotAttention;
-use crate::slot_ssm::{SlotSsm, SlotSsmState};
 use crate::text::TextEncoder;
+pub use crate::variants::Carry;
+use crate::variants::{Shared, TokenBuilder};
 
 /// A training batch of windows.
 #[derive(Clone, Debug)]
@@ -34,7 +29,7 @@ pub struct WindowBatch {
     pub frame_mask: Tensor<2>,
     /// Which action entries count in L_act `[B, T, H_a, A]` (None: every entry of a valid frame).
     pub action_mask: Option<Tensor<4>>,
-    /// Instruction token ids `[B, L_txt]` (see [`crate::text::Tokenizer`]).
+    /// Instruction token ids `[B, L_txt]` (see [`crate::io::Tokenizer`]).
     pub instruction: Tensor<2, Int>,
     /// Oracle subgoal token ids `[B, T, G, L_sg]`, G = 1 (shared by all slots) or K (per slot).
     pub subgoal: Option<Tensor<4, Int>>,
@@ -72,56 +67,20 @@ pub struct Losses {
     pub slot_recon: Option<Tensor<1>>,
 }
 
-/// Memory carried from one window to the next of the same episodes (truncated BPTT, model.md
-/// §10): the last frame's slots and the SlotSSM state, both detached.
-///
-/// SlotVLA(h > 1) and dense(h > 1) windows still start their history at the window's first frame.
-#[derive(Clone, Debug, Default)]
-pub struct Carry {
-    /// Slots of the last frame `[B, K, D]` (slot variants).
-    pub slots: Option<Tensor<3>>,
-    /// SlotSSM state after the last frame (e_slotssm).
-    pub ssm: Option<SlotSsmState>,
-}
-
-/// Per-frame visual token types added before the decoder.
-const TYPE_RELATION: usize = 0;
-const TYPE_SLOT: usize = 1;
-const TYPE_PATCH: usize = 2;
-
-/// The policy network of any variant.
+/// The policy network of any variant: the shared encoder, language and decoder around the
+/// variant's [`TokenBuilder`].
 #[derive(Module, Debug)]
 pub struct PolicyModel {
     /// Visual encoder.
     pub encoder: VisualEncoder,
-    /// Slot attention (slot variants).
-    pub slot_attention: Option<SlotAttention>,
-    /// SlotSSM (e_slotssm).
-    pub slot_ssm: Option<SlotSsm>,
-    /// Windowed head (e_slotssm).
-    pub window_head: Option<WindowHead>,
-    /// Slot fusion (e_slotssm).
-    pub fusion: Option<SlotFusion>,
-    /// Learned null subgoal `[D_txt]` (e_slotssm without oracle subgoals).
-    pub null_subgoal: Option<Param<Tensor<1>>>,
-    /// z = Linear(s) `[D, D]` (SlotVLA).
-    pub slot_proj: Option<Linear>,
-    /// Relation encoder (slot variants).
-    pub relation: Option<RelationEncoder>,
-    /// Slot / relation tokens to the decoder width `[D, D_dec]` (slot variants).
-    pub token_proj: Option<Linear>,
-    /// Patch tokens W_p `[D_f, D_dec]` (dense).
-    pub patch_proj: Option<Linear>,
+    /// The variant: visual features → decoder tokens, with its memory.
+    pub tokens: TokenBuilder,
     /// Visual token types (relation, slot, patch) `[3, D_dec]`.
     pub token_type: Param<Tensor<2>>,
-    /// Frame-offset embedding of the history `[h, D_dec]` (h > 1).
-    pub frame_offset: Option<Param<Tensor<2>>>,
     /// Language (and subgoal) embeddings, width D_dec.
     pub text: TextEncoder,
     /// Action decoder.
     pub decoder: ActionDecoder,
-    /// Slot decoder of L_sa.
-    pub slot_decoder: Option<SlotDecoder>,
     /// The configuration this model was built from.
     #[module(skip)]
     pub config: ModelConfig,
@@ -131,57 +90,17 @@ impl PolicyModel {
     /// Builds a freshly initialised model (seed the device first for reproducibility).
     pub fn new(config: &ModelConfig, device: &Device) -> Result<Self> {
         config.validate()?;
-        let variant = config.variant;
-        let d = config.slots.dim;
         let w = config.decoder.width;
-        let d_f = config.encoder.feature_dim;
-        let slots = variant.has_slots();
-        let ssm = variant.has_ssm();
-        let oracle = matches!(
-            variant,
-            Variant::ESlotSsm {
-                oracle_subgoal: true
-            }
-        );
-        let h = variant.history();
         Ok(PolicyModel {
             encoder: VisualEncoder::new(config, device),
-            slot_attention: slots.then(|| SlotAttention::new(config, device)),
-            slot_ssm: ssm.then(|| SlotSsm::new(config, device)),
-            window_head: ssm
-                .then(|| WindowHead::new(d, config.window.past + config.window.future, device)),
-            fusion: ssm.then(|| SlotFusion::new(d, w, device)),
-            null_subgoal: (ssm && !oracle).then(|| {
-                Param::from_tensor(Tensor::random([w], Distribution::Normal(0.0, 1.0), device))
-            }),
-            slot_proj: matches!(variant, Variant::SlotVla { .. })
-                .then(|| LinearConfig::new(d, d).init(device)),
-            relation: slots.then(|| RelationEncoder::new(config, device)),
-            token_proj: slots.then(|| LinearConfig::new(d, w).init(device)),
-            patch_proj: (!slots).then(|| LinearConfig::new(d_f, w).init(device)),
+            tokens: TokenBuilder::new(config, device),
             token_type: Param::from_tensor(Tensor::random(
                 [3, w],
                 Distribution::Normal(0.0, 0.02),
                 device,
             )),
-            frame_offset: (h > 1).then(|| {
-                Param::from_tensor(Tensor::random(
-                    [h, w],
-                    Distribution::Normal(0.0, 0.02),
-                    device,
-                ))
-            }),
             text: TextEncoder::new(&config.text, w, device),
             decoder: ActionDecoder::new(&config.decoder, device),
-            slot_decoder: config.has_sa_decoder().then(|| {
-                SlotDecoder::new(
-                    config.num_patches(),
-                    d,
-                    config.loss.sa_hidden,
-                    config.sa_target_dim(),
-                    device,
-                )
-            }),
             config: config.clone(),
         })
     }
@@ -201,96 +120,9 @@ impl PolicyModel {
             .map_err(|e| ModelError::Record(format!("{}: {e}", path.as_ref().display())))
     }
 
-    /// Embedding of one visual token type.
-    ///
-    /// # Shapes
-    /// - output: `[1, 1, D_dec]`
-    fn type_embedding(&self, kind: usize) -> Tensor<3> {
-        self.token_type.val().narrow(0, kind, 1).unsqueeze_dim(0)
-    }
-
-    /// Subgoal embeddings g per slot.
-    ///
-    /// # Shapes
-    /// - subgoal: `[N, G, L_sg]`, G ∈ {1, K}
-    /// - output: `[N, K, D_txt]`
-    pub(crate) fn subgoal_embedding(
-        &self,
-        subgoal: Option<Tensor<3, Int>>,
-        n: usize,
-        device: &Device,
-    ) -> Result<Tensor<3>> {
-        let k = self.config.slots.num_slots;
-        let w = self.config.decoder.width;
-        match (subgoal, &self.null_subgoal) {
-            (_, Some(null)) => Ok(null
-                .val()
-                .reshape([1, 1, w])
-                .repeat_dim(0, n)
-                .repeat_dim(1, k)),
-            (Some(ids), None) => {
-                let [n2, g, l] = ids.dims();
-                if n2 != n || (g != 1 && g != k) {
-                    return Err(ModelError::Input(format!(
-                        "subgoal ids have shape {:?}, expected [{n}, 1 or {k}, L]",
-                        ids.dims()
-                    )));
-                }
-                let e = self.text.pooled(ids.reshape([n * g, l])).reshape([n, g, w]);
-                Ok(if g == 1 { e.repeat_dim(1, k) } else { e })
-            }
-            (None, None) => {
-                // Oracle model without a subgoal: every slot gets the empty text (zeros).
-                Ok(Tensor::zeros([n, k, w], device))
-            }
-        }
-    }
-
-    /// Decoder tokens of single frames.
-    ///
-    /// # Shapes
-    /// - feats: `[N, M, D_f]`; z: `[N, K, D]` (slot variants)
-    /// - output: `[N, V₁, D_dec]`, V₁ = L + K (slots) or M (dense)
-    pub(crate) fn frame_tokens(&self, feats: Tensor<3>, z: Option<Tensor<3>>) -> Tensor<3> {
-        match (&self.relation, &self.token_proj, z) {
-            (Some(rel), Some(proj), Some(z)) => {
-                let r = rel.forward(feats, z.clone());
-                let r = proj.forward(r) + self.type_embedding(TYPE_RELATION);
-                let z = proj.forward(z) + self.type_embedding(TYPE_SLOT);
-                Tensor::cat(vec![r, z], 1)
-            }
-            _ => {
-                let proj = self
-                    .patch_proj
-                    .as_ref()
-                    .expect("dense model has a patch projection");
-                proj.forward(feats) + self.type_embedding(TYPE_PATCH)
-            }
-        }
-    }
-
-    /// Adds the frame-offset embedding to `n_frames` frames of tokens that end at the current
-    /// frame, and concatenates them (oldest first).
-    ///
-    /// # Shapes
-    /// - frames: n_frames × `[N, V₁, D_dec]` (oldest first, n_frames ≤ h)
-    /// - output: `[N, n_frames·V₁, D_dec]`
-    pub(crate) fn stack_history(&self, frames: Vec<Tensor<3>>) -> Tensor<3> {
-        let h = self.config.variant.history();
-        let n_frames = frames.len();
-        assert!(n_frames >= 1 && n_frames <= h);
-        match &self.frame_offset {
-            None => frames.into_iter().next().expect("one frame"),
-            Some(emb) => {
-                let emb = emb.val();
-                let frames = frames
-                    .into_iter()
-                    .enumerate()
-                    .map(|(i, f)| f + emb.clone().narrow(0, h - n_frames + i, 1).unsqueeze_dim(0))
-                    .collect();
-                Tensor::cat(frames, 1)
-            }
-        }
+    /// The modules the variant reads but does not own.
+    pub(crate) fn shared(&self) -> (Tensor<2>, &TextEncoder) {
+        (self.token_type.val(), &self.text)
     }
 
     /// Decodes per frame given language ids.
@@ -353,149 +185,31 @@ impl PolicyModel {
                 cfg.text.max_len
             )));
         }
-        let device = images.device();
-        let n = b * t;
         let feats = self.encoder.forward(images); // [B, T, M, D_f]
-        let [_, _, m, d_f] = feats.dims();
-        let flat_feats = feats.clone().reshape([n, m, d_f]);
-        let k = cfg.slots.num_slots;
-        let d = cfg.slots.dim;
-
-        if let (Some(ssm), Some(state)) = (&self.slot_ssm, &carry.ssm) {
-            let n_seq = b * cfg.slots.num_slots;
-            let ok = state.blocks.len() == ssm.blocks.len()
-                && state.blocks.iter().all(|s| {
-                    s.h.dims() == [n_seq, cfg.ssm.inner, cfg.ssm.state]
-                        && s.conv.dims() == [n_seq, cfg.ssm.inner, cfg.ssm.conv - 1]
-                });
-            if !ok {
-                return Err(ModelError::Input(
-                    "carried SlotSSM state does not match the model and batch".into(),
-                ));
-            }
-        }
-        let mut new_carry = Carry::default();
-        let mut out = WindowOutput {
-            actions: Tensor::zeros([1, 1, 1, 1], &device),
-            logits: None,
-            slots: None,
-            masks: None,
-            predicted: None,
-            window: None,
+        let (token_type, text) = self.shared();
+        let shared = Shared {
+            token_type: &token_type,
+            text,
         };
-        let z = if let Some(sa) = &self.slot_attention {
-            if let Some(prev) = &carry.slots
-                && prev.dims() != [b, k, d]
-            {
-                return Err(ModelError::Input(format!(
-                    "carried slots {:?}, expected [{b}, {k}, {d}]",
-                    prev.dims()
-                )));
-            }
-            let (slots, masks) = sa.forward(feats.clone(), carry.slots.clone());
-            new_carry.slots = Some(
-                slots
-                    .clone()
-                    .narrow(1, t - 1, 1)
-                    .squeeze_dim::<3>(1)
-                    .detach(),
-            );
-            out.masks = Some(masks);
-            let z = if let (Some(ssm), Some(head), Some(fusion)) =
-                (&self.slot_ssm, &self.window_head, &self.fusion)
-            {
-                let ssm_feats = cfg.ssm.cross_attention.then(|| feats.clone());
-                let (pred, state) = ssm.forward(slots.clone(), ssm_feats, carry.ssm.clone());
-                new_carry.ssm = Some(state.detach());
-                out.window = Some(head.forward(pred.clone(), slots.clone()));
-                let sub = subgoal.map(|s| {
-                    let [_, _, g, l] = s.dims();
-                    s.reshape([n, g, l])
-                });
-                let g = self.subgoal_embedding(sub, n, &device)?;
-                let z = fusion.forward(
-                    slots.clone().reshape([n, k, d]),
-                    pred.clone().reshape([n, k, d]),
-                    g,
-                );
-                out.predicted = Some(pred);
-                z
-            } else {
-                let proj = self
-                    .slot_proj
-                    .as_ref()
-                    .expect("SlotVLA has a slot projection");
-                proj.forward(slots.clone().reshape([n, k, d]))
-            };
-            out.slots = Some(slots);
-            Some(z)
-        } else {
-            None
-        };
-        let tokens = self.frame_tokens(flat_feats, z); // [N, V₁, D_dec]
-        let (visual, pad) = self.window_history(tokens, b, t);
+        let win = self.tokens.window(feats, subgoal, carry, shared)?;
         let instr = instruction
             .unsqueeze_dim::<3>(1)
             .repeat_dim(1, t)
-            .reshape([n, l_txt]);
-        let dec = self.decode(visual, pad, instr);
+            .reshape([b * t, l_txt]);
+        let dec = self.decode(win.tokens, win.pad, instr);
         let (ha, a) = (cfg.decoder.horizon, cfg.decoder.action_dim);
-        out.actions = dec.actions.reshape([b, t, ha, a]);
-        out.logits = dec
-            .logits
-            .map(|l| l.reshape([b, t, ha, a, crate::decoder::NUM_BINS]));
-        Ok((out, new_carry))
-    }
-
-    /// History tokens for every frame of a window: frame t sees frames t−h+1 … t; frames before
-    /// the window start repeat frame 0 and are masked.
-    ///
-    /// # Shapes
-    /// - tokens: `[B·T, V₁, D_dec]`
-    /// - output: (`[B·T, h·V₁, D_dec]`, pad `[B·T, h·V₁]` when h > 1)
-    fn window_history(
-        &self,
-        tokens: Tensor<3>,
-        b: usize,
-        t: usize,
-    ) -> (Tensor<3>, Option<Tensor<2, Bool>>) {
-        let h = self.config.variant.history();
-        if h == 1 {
-            return (tokens, None);
-        }
-        let [_, v, w] = tokens.dims();
-        let device = tokens.device();
-        let x = tokens.reshape([b, t, v, w]);
-        let first = x.clone().narrow(1, 0, 1);
-        let mut frames = Vec::with_capacity(h);
-        let mut pads = Vec::with_capacity(h);
-        for o in 0..h {
-            let lag = h - 1 - o;
-            let shifted = if lag == 0 {
-                x.clone()
-            } else if lag >= t {
-                first.clone().repeat_dim(1, t)
-            } else {
-                Tensor::cat(
-                    vec![
-                        first.clone().repeat_dim(1, lag),
-                        x.clone().narrow(1, 0, t - lag),
-                    ],
-                    1,
-                )
-            };
-            frames.push(shifted.reshape([b * t, v, w]));
-            let pad: Vec<f32> = (0..t).map(|ti| if ti < lag { 1.0 } else { 0.0 }).collect();
-            pads.push(
-                Tensor::<1>::from_data(TensorData::new(pad, [t]), &device)
-                    .reshape([1, t, 1])
-                    .repeat_dim(0, b)
-                    .repeat_dim(2, v)
-                    .reshape([b * t, v]),
-            );
-        }
-        let visual = self.stack_history(frames);
-        (visual, Some(Tensor::cat(pads, 1).equal_elem(1.0)))
+        let parts = win.parts;
+        let out = WindowOutput {
+            actions: dec.actions.reshape([b, t, ha, a]),
+            logits: dec
+                .logits
+                .map(|l| l.reshape([b, t, ha, a, crate::decoder::NUM_BINS])),
+            slots: parts.slots,
+            masks: parts.masks,
+            predicted: parts.predicted,
+            window: parts.window,
+        };
+        Ok((out, win.carry))
     }
 
     /// Training forward: predictions and all losses of a window batch (windows start from an
@@ -562,7 +276,11 @@ impl PolicyModel {
         if let Some(l) = &window {
             total = total + l.clone().mul_scalar(cfg.loss.window);
         }
-        let slot_recon = match (&self.slot_decoder, &out.slots) {
+        let slot_decoder = self
+            .tokens
+            .slot_core()
+            .and_then(|c| c.slot_decoder.as_ref());
+        let slot_recon = match (slot_decoder, &out.slots) {
             (Some(dec), Some(s)) => {
                 let [_, _, k, d] = s.dims();
                 let (recon, _) = dec.forward(s.clone().reshape([b * t, k, d]));
@@ -596,8 +314,9 @@ impl PolicyModel {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::config::Variant;
+    use crate::io::Tokenizer;
     use crate::streaming::StreamingPolicy;
-    use crate::text::Tokenizer;
     use crate::{test_autodiff_device, test_device};
     use burn::module::ModuleVisitor;
     use burn::tensor::Distribution;

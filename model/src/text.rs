@@ -1,9 +1,7 @@
-//! Language: a word-level tokenizer over the task vocabulary and learned embeddings (model.md §8).
-//!
-//! Ids: 0 = padding, 1 = unknown word, word i of the vocabulary = i + 2. The instruction gives the
-//! decoder's language tokens; a subgoal text is mean-pooled into one embedding g.
-
-use std::collections::HashMap;
+//! Language: learned word embeddings over the task vocabulary (model.md §8); the ids come from
+//! [`crate::io::Tokenizer`] (0 = padding, 1 = unknown word, word i of the vocabulary = i + 2).
+//! The instruction gives the decoder's language tokens; a subgoal text is mean-pooled into one
+//! embedding g.
 
 use burn::module::Param;
 use burn::nn::{Embedding, EmbeddingConfig};
@@ -13,66 +11,7 @@ use burn::tensor::Distribution;
 use crate::config::TextConfig;
 
 /// Padding id.
-pub const PAD: i64 = 0;
-/// Unknown-word id.
-pub const UNK: i64 = 1;
-
-/// Splits a text into lower-case alphanumeric words.
-pub fn words(text: &str) -> Vec<String> {
-    text.split(|c: char| !c.is_alphanumeric())
-        .filter(|w| !w.is_empty())
-        .map(str::to_lowercase)
-        .collect()
-}
-
-/// Word-level tokenizer.
-#[derive(Clone, Debug)]
-pub struct Tokenizer {
-    ids: HashMap<String, i64>,
-    max_len: usize,
-}
-
-impl Tokenizer {
-    /// Builds the tokenizer of `config`.
-    pub fn new(config: &TextConfig) -> Self {
-        let ids = config
-            .vocab
-            .iter()
-            .enumerate()
-            .map(|(i, w)| (w.to_lowercase(), i as i64 + 2))
-            .collect();
-        Tokenizer {
-            ids,
-            max_len: config.max_len,
-        }
-    }
-
-    /// Vocabulary size including the two special ids.
-    pub fn vocab_size(&self) -> usize {
-        self.ids.len() + 2
-    }
-
-    /// Token ids of `text`, cut or padded to exactly `max_len`.
-    pub fn encode(&self, text: &str) -> Vec<i64> {
-        let mut out: Vec<i64> = words(text)
-            .iter()
-            .map(|w| *self.ids.get(w).unwrap_or(&UNK))
-            .take(self.max_len)
-            .collect();
-        out.resize(self.max_len, PAD);
-        out
-    }
-
-    /// Token ids of several texts as a tensor.
-    ///
-    /// # Shapes
-    /// - output: `[texts.len(), max_len]`
-    pub fn encode_batch(&self, texts: &[&str], device: &Device) -> Tensor<2, Int> {
-        let data: Vec<i64> = texts.iter().flat_map(|t| self.encode(t)).collect();
-        Tensor::from_data(TensorData::new(data, [texts.len(), self.max_len]), device)
-    }
-}
-
+pub const PAD: i64 = data::text::PAD as i64;
 /// Learned word embeddings with learned positions.
 #[derive(Module, Debug)]
 pub struct TextEncoder {
@@ -128,6 +67,7 @@ impl TextEncoder {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::io::Tokenizer;
     use crate::test_device;
 
     fn cfg() -> TextConfig {
@@ -141,18 +81,6 @@ mod tests {
             ],
             max_len: 6,
         }
-    }
-
-    #[test]
-    fn tokenizer_maps_words_pads_and_cuts() {
-        let tok = Tokenizer::new(&cfg());
-        assert_eq!(tok.vocab_size(), 7);
-        assert_eq!(
-            tok.encode("Put the bowl on the PLATE."),
-            vec![5, 6, 2, 3, 6, 4]
-        );
-        assert_eq!(tok.encode("put the mug"), vec![5, 6, UNK, PAD, PAD, PAD]);
-        assert_eq!(tok.encode("the the the the the the the").len(), 6);
     }
 
     #[test]

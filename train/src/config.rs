@@ -201,35 +201,7 @@ pub struct TrainSection {
     pub stages: Vec<Stage>,
 }
 
-/// `[[train.stages]]`: one stage of staged training. Stages run in order for their `steps`
-/// (the last one runs until `[train].steps`); the learning-rate schedule spans the whole run.
-///
-/// ```toml
-/// [[train.stages]]
-/// name = "slots"                    # slot attention learns objects first
-/// steps = 2000
-/// losses = ["slot_recon", "contrastive"]
-/// freeze = ["decoder", "slot_ssm"]
-/// [[train.stages]]
-/// name = "action"                   # then everything, every loss
-/// losses = ["action", "contrastive", "window", "slot_recon"]
-/// ```
-#[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct Stage {
-    /// Name (metrics and progress bar).
-    pub name: String,
-    /// Optimiser steps of this stage (may be left out for the last one).
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub steps: Option<u64>,
-    /// Loss terms summed (with their λ) into this stage's total: `action`, `contrastive`,
-    /// `window`, `slot_recon`.
-    pub losses: Vec<String>,
-    /// Model parts whose weights stay fixed (fields of `model::PolicyModel`: `encoder`,
-    /// `slot_attention`, `slot_ssm`, `window_head`, `fusion`, `relation`, `decoder`, `text`, …).
-    #[serde(default, skip_serializing_if = "Vec::is_empty")]
-    pub freeze: Vec<String>,
-}
+pub use crate::stages::Stage;
 
 impl Default for TrainSection {
     fn default() -> Self {
@@ -254,32 +226,7 @@ impl Default for TrainSection {
     }
 }
 
-/// Which Burn device trains.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Default, Serialize, Deserialize)]
-#[serde(rename_all = "lowercase")]
-pub enum BackendKind {
-    /// Burn's pure-Rust CPU backend (always compiled in; the default).
-    #[default]
-    Flex,
-    /// burn-ndarray (cargo feature `ndarray`; deprecated upstream).
-    Ndarray,
-    /// wgpu (cargo feature `wgpu`).
-    Wgpu,
-}
-
-impl std::str::FromStr for BackendKind {
-    type Err = TrainError;
-    fn from_str(s: &str) -> Result<Self> {
-        match s {
-            "flex" => Ok(BackendKind::Flex),
-            "ndarray" => Ok(BackendKind::Ndarray),
-            "wgpu" => Ok(BackendKind::Wgpu),
-            _ => Err(TrainError::Usage(format!(
-                "unknown backend `{s}` (expected flex, ndarray or wgpu)"
-            ))),
-        }
-    }
-}
+pub use model::backend::BackendKind;
 
 /// `[backend]`.
 #[derive(Clone, Debug, PartialEq, Default, Serialize, Deserialize)]

@@ -1,23 +1,24 @@
-//! The data side of a run: make sure the dataset exists (generating it when the config asks),
-//! open the train/val windows, draw batches in a seeded order and turn them into the model's
-//! [`model::WindowBatch`].
+//! The data side of a run: make sure the dataset exists (generating it when the config asks and
+//! the `generate` feature is on), open the train/val windows, draw batches in a seeded order and
+//! turn them into the model's [`model::WindowBatch`] through the policy's one input path,
+//! [`model::Processor::batch`].
 
+#[cfg(feature = "generate")]
 use std::path::Path;
 
-use burn::data::dataloader::batcher::Batcher;
 use burn::prelude::*;
-use data::burn_adapter::WindowBatcher;
 use data::{DatasetIndex, Split, WindowConfig, WindowDataset};
+#[cfg(feature = "generate")]
 use indicatif::{ProgressBar, ProgressStyle};
+use model::Processor;
 use rand::SeedableRng;
 use rand::seq::SliceRandom;
 use rand_chacha::ChaCha8Rng;
 
-use crate::config::{Config, GenerateSpec};
+use crate::config::Config;
+#[cfg(feature = "generate")]
+use crate::config::GenerateSpec;
 use crate::error::{Result, TrainError};
-
-/// Objects per frame given to the batcher (the current variants do not read boxes).
-const MAX_OBJECTS: usize = 8;
 
 /// Makes sure `[data].dir` holds a dataset: present → nothing to do; missing with
 /// `[data].generate` → [`generate_dataset`] (with a progress bar when `progress`); missing
@@ -28,7 +29,19 @@ pub fn ensure_dataset(cfg: &Config, progress: bool) -> Result<()> {
         return Ok(());
     }
     match &cfg.data.generate {
+        #[cfg(feature = "generate")]
         Some(spec) => generate_dataset(spec, dir, progress).map(|_| ()),
+        #[cfg(not(feature = "generate"))]
+        Some(_) => {
+            let _ = progress;
+            Err(TrainError::DatasetMissing {
+                dir: dir.clone(),
+                hint: "`[data].generate` needs the simulator, and this trainer was built without \
+                       it (cargo feature `train/generate`); record the episodes with \
+                       `sim generate --task T --out DIR` first"
+                    .into(),
+            })
+        }
         None => Err(TrainError::DatasetMissing {
             dir: dir.clone(),
             hint: "no index.json there and `[data].generate` is not set; record episodes with \
@@ -41,6 +54,7 @@ pub fn ensure_dataset(cfg: &Config, progress: bool) -> Result<()> {
 /// Generates `spec` into `dir` with the simulator's scripted expert (`sim::generate`): the same
 /// files as `sim generate` with the same arguments; resumable (finished episodes are kept, so an
 /// interrupted generation continues where it stopped); writes the dataset index last.
+#[cfg(feature = "generate")]
 pub fn generate_dataset(spec: &GenerateSpec, dir: &Path, progress: bool) -> Result<DatasetIndex> {
     let bad = |message: String| TrainError::Usage(format!("data.generate: {message}"));
     let task = sim::task::resolve(&spec.task).map_err(|e| bad(e.to_string()))?;
@@ -104,10 +118,8 @@ pub struct RunData {
     pub train: WindowDataset,
     /// Validation windows (None when the split is empty).
     pub val: Option<WindowDataset>,
-    /// Stacks samples into tensors.
-    pub batcher: WindowBatcher,
-    /// Whether the model reads the per-frame subgoal text (oracle variant).
-    pub subgoals: bool,
+    /// The policy's input path: samples → model tensors.
+    pub processor: Processor,
 }
 
 impl RunData {
@@ -147,18 +159,12 @@ impl RunData {
         } else {
             Some(WindowDataset::from_index(dir, &index, Split::Val, val_win)?)
         };
-        let batcher = WindowBatcher::new(index.vocab(), model.text.max_len, MAX_OBJECTS);
+        let processor = Processor::new(model, train.action_norm().clone());
         Ok(RunData {
             index,
             train,
             val,
-            batcher,
-            subgoals: matches!(
-                model.variant,
-                model::Variant::ESlotSsm {
-                    oracle_subgoal: true
-                }
-            ),
+            processor,
         })
     }
 
@@ -185,28 +191,7 @@ impl RunData {
             .par_iter()
             .map(|&(i, epoch)| ds.get_with_epoch(i, epoch))
             .collect::<data::Result<Vec<_>>>()?;
-        let b = self.batcher.batch(samples, device);
-        let [bs, t] = b.frame_mask.dims();
-        let [_, _, ha, a] = b.actions.dims();
-        let frame = b.frame_mask.float();
-        let action_mask = b
-            .action_mask
-            .float()
-            .mul(frame.clone().reshape([bs, t, 1]))
-            .reshape([bs, t, ha, 1])
-            .repeat_dim(3, a);
-        let subgoal = self.subgoals.then(|| {
-            let [_, _, l] = b.subgoal_ids.dims();
-            b.subgoal_ids.reshape([bs, t, 1, l])
-        });
-        Ok(model::WindowBatch {
-            images: b.images,
-            actions: b.actions,
-            frame_mask: frame,
-            action_mask: Some(action_mask),
-            instruction: b.instruction_ids,
-            subgoal,
-        })
+        Ok(self.processor.batch(&samples, device)?)
     }
 }
 

@@ -26,14 +26,6 @@ pub enum TrainError {
         /// How to make it.
         hint: String,
     },
-    /// A backend that this binary was built without.
-    #[error("backend `{name}` is not compiled in (rebuild with `--features train/{feature}`)")]
-    BackendUnavailable {
-        /// Backend name.
-        name: String,
-        /// The cargo feature that enables it.
-        feature: String,
-    },
     /// A checkpoint of another model (variant, sizes, vocabulary) or of a broken format.
     #[error("incompatible checkpoint {}: {message}", path.display())]
     IncompatibleCheckpoint {
@@ -80,8 +72,12 @@ impl TrainError {
             TrainError::Config { .. }
             | TrainError::Usage(_)
             | TrainError::DatasetMissing { .. }
-            | TrainError::BackendUnavailable { .. }
-            | TrainError::IncompatibleCheckpoint { .. } => 2,
+            | TrainError::IncompatibleCheckpoint { .. }
+            | TrainError::Model(
+                model::ModelError::BackendUnavailable { .. }
+                | model::ModelError::Run { .. }
+                | model::ModelError::Config(_),
+            ) => 2,
             _ => 1,
         }
     }

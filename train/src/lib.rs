@@ -1,7 +1,12 @@
 //! Trainer of the LIBERO-Mem policies: an experiment config (TOML) → a training run in
-//! `runs/<name>/` with the resolved `config.toml`, `model.json` and `action_stats.json` (what
-//! eval needs), atomic resumable checkpoints, per-step metrics (`metrics.jsonl`, `val.jsonl`)
-//! and loss-curve plots (`plots/loss_<term>.png`).
+//! `runs/<name>/`: the policy's files as `model::run` defines them (`run.json`, `model.json`,
+//! `processor.json`, `action_stats.json`, atomic checkpoints — what eval reads), plus the
+//! resolved `config.toml`, the optimiser and sampler state in each checkpoint (resumable),
+//! per-step metrics (`metrics.jsonl`, `val.jsonl`) and loss-curve plots (`plots/loss_<term>.png`).
+//!
+//! The cargo feature `generate` (default) lets `[data].generate` record a missing dataset
+//! through the simulator; without it the crate builds and trains with no simulator (no
+//! libmujoco), on datasets recorded with `sim generate`.
 //!
 //! ```no_run
 //! let cfg = train::Config::load("configs/tiny.toml")?;
@@ -12,7 +17,6 @@
 
 #![warn(missing_docs)]
 
-pub mod backend;
 pub mod checkpoint;
 pub mod clip;
 pub mod config;

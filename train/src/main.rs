@@ -40,7 +40,12 @@ fn run(args: Args) -> Result<train::TrainSummary, train::TrainError> {
         keep: args.keep,
         steps: args.steps,
         run_dir: args.run_dir,
-        backend: args.backend.as_deref().map(str::parse).transpose()?,
+        backend: args
+            .backend
+            .as_deref()
+            .map(str::parse)
+            .transpose()
+            .map_err(train::TrainError::Usage)?,
         progress: !args.quiet,
         stop_at: None,
     };

@@ -1,8 +1,10 @@
 //! Staged training (`[[train.stages]]`), as in the reference recipe: first the slot losses with
 //! the action side frozen, then the SlotSSM, then the action decoder (or everything). Each stage
 //! names the loss terms that form its total (with the config's λ) and the model parts whose
-//! weights stay fixed; which stage is active is a function of the step alone, so a resumed run
+//! weights stay fixed (by module name anywhere in the model tree, found by a `ModuleVisitor`); which stage is active is a function of the step alone, so a resumed run
 //! continues in the stage where it stopped.
+
+use std::collections::BTreeSet;
 
 use burn::module::{Module, ModuleVisitor, Param};
 use burn::optim::GradientsParams;
@@ -10,29 +12,41 @@ use burn::prelude::*;
 use model::config::LossConfig;
 use model::{Losses, PolicyModel};
 
-use crate::config::Stage;
+use serde::{Deserialize, Serialize};
+
+/// `[[train.stages]]`: one stage of staged training. Stages run in order for their `steps`
+/// (the last one runs until `[train].steps`); the learning-rate schedule spans the whole run.
+///
+/// ```toml
+/// [[train.stages]]
+/// name = "slots"                    # slot attention learns objects first
+/// steps = 2000
+/// losses = ["slot_recon", "contrastive"]
+/// freeze = ["decoder", "slot_ssm"]
+/// [[train.stages]]
+/// name = "action"                   # then everything, every loss
+/// losses = ["action", "contrastive", "window", "slot_recon"]
+/// ```
+#[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Stage {
+    /// Name (metrics and progress bar).
+    pub name: String,
+    /// Optimiser steps of this stage (may be left out for the last one).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub steps: Option<u64>,
+    /// Loss terms summed (with their λ) into this stage's total: `action`, `contrastive`,
+    /// `window`, `slot_recon`.
+    pub losses: Vec<String>,
+    /// Model parts whose weights stay fixed, by module name anywhere in the model tree
+    /// (`encoder`, `slot_attention`, `slot_ssm`, `window_head`, `fusion`, `relation`,
+    /// `decoder`, `text`, …; [`parts`] lists a model's).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub freeze: Vec<String>,
+}
 
 /// Loss terms a stage may switch on.
 pub const LOSSES: [&str; 4] = ["action", "contrastive", "window", "slot_recon"];
-
-/// Model parts a stage may freeze (the fields of [`PolicyModel`]; absent ones are ignored).
-pub const MODULES: [&str; 15] = [
-    "encoder",
-    "slot_attention",
-    "slot_ssm",
-    "window_head",
-    "fusion",
-    "null_subgoal",
-    "slot_proj",
-    "relation",
-    "token_proj",
-    "patch_proj",
-    "token_type",
-    "frame_offset",
-    "text",
-    "decoder",
-    "slot_decoder",
-];
 
 /// The stage of step `step` (steps done so far, 0-based): stages follow each other for their
 /// `steps`; the last one runs to the end. `None` without stages.
@@ -75,44 +89,79 @@ pub fn total(stage: &Stage, losses: &Losses, weights: &LossConfig) -> Option<Ten
     total
 }
 
-/// Drops the gradients of every parameter it visits (the optimiser then leaves them alone:
-/// no update, no weight decay, no moment change).
-struct DropGrads<'a>(&'a mut GradientsParams);
+/// Walks the model tree (module path = field and variant names, e.g.
+/// `tokens.SlotSsm.core.slot_attention.gru`) and drops the gradients of every parameter that
+/// lies inside a module named one of `names`, at any depth (the optimiser then leaves them alone:
+/// no update, no weight decay, no moment change). Also collects every name it passes.
+struct Freeze<'a> {
+    grads: Option<&'a mut GradientsParams>,
+    names: &'a [String],
+    path: Vec<String>,
+    seen: BTreeSet<String>,
+}
 
-impl ModuleVisitor for DropGrads<'_> {
+impl ModuleVisitor for Freeze<'_> {
+    fn enter_module(&mut self, name: &str, _container_type: &str) {
+        self.path.push(name.to_string());
+        self.seen.insert(name.to_string());
+    }
+
+    fn exit_module(&mut self, _name: &str, _container_type: &str) {
+        self.path.pop();
+    }
+
     fn visit_float<const D: usize>(&mut self, param: &Param<Tensor<D>>) {
-        self.0.remove::<D>(param.id);
+        if let Some(grads) = self.grads.as_deref_mut()
+            && self.path.iter().any(|p| self.names.contains(p))
+        {
+            grads.remove::<D>(param.id);
+        }
     }
 }
 
-/// Visits the model part `name` (one of [`MODULES`]; nothing for an absent part).
-pub fn visit_part<V: ModuleVisitor>(model: &PolicyModel, name: &str, v: &mut V) {
-    match name {
-        "encoder" => model.encoder.visit(v),
-        "slot_attention" => model.slot_attention.visit(v),
-        "slot_ssm" => model.slot_ssm.visit(v),
-        "window_head" => model.window_head.visit(v),
-        "fusion" => model.fusion.visit(v),
-        "null_subgoal" => model.null_subgoal.visit(v),
-        "slot_proj" => model.slot_proj.visit(v),
-        "relation" => model.relation.visit(v),
-        "token_proj" => model.token_proj.visit(v),
-        "patch_proj" => model.patch_proj.visit(v),
-        "token_type" => model.token_type.visit(v),
-        "frame_offset" => model.frame_offset.visit(v),
-        "text" => model.text.visit(v),
-        "decoder" => model.decoder.visit(v),
-        "slot_decoder" => model.slot_decoder.visit(v),
-        _ => {}
-    }
+/// The names of the model's parts (every module and parameter name in its tree) that a stage
+/// may freeze.
+pub fn parts(model: &PolicyModel) -> BTreeSet<String> {
+    let mut v = Freeze {
+        grads: None,
+        names: &[],
+        path: Vec::new(),
+        seen: BTreeSet::new(),
+    };
+    model.visit(&mut v);
+    v.seen
 }
 
 /// Removes the gradients of the stage's frozen parts from `grads`.
 pub fn freeze(model: &PolicyModel, stage: &Stage, grads: &mut GradientsParams) {
-    let mut v = DropGrads(grads);
-    for name in &stage.freeze {
-        visit_part(model, name, &mut v);
+    let mut v = Freeze {
+        grads: Some(grads),
+        names: &stage.freeze,
+        path: Vec::new(),
+        seen: BTreeSet::new(),
+    };
+    model.visit(&mut v);
+}
+
+/// Checks that every part a stage freezes exists in `model` (the message names the stage).
+pub fn check_freeze(stages: &[Stage], model: &PolicyModel) -> std::result::Result<(), String> {
+    let known = parts(model);
+    for (i, s) in stages.iter().enumerate() {
+        if let Some(m) = s.freeze.iter().find(|m| !known.contains(m.as_str())) {
+            let top: Vec<&str> = known
+                .iter()
+                .map(String::as_str)
+                .filter(|n| !n.chars().next().is_some_and(char::is_uppercase))
+                .collect();
+            return Err(format!(
+                "train.stages[{i}] (`{}`).freeze: the `{}` model has no part `{m}` (its parts: {})",
+                s.name,
+                model.config.variant.name(),
+                top.join(", ")
+            ));
+        }
     }
+    Ok(())
 }
 
 /// Checks a `[[train.stages]]` list; the message names the key at fault.
@@ -130,11 +179,6 @@ pub fn check(stages: &[Stage]) -> std::result::Result<(), String> {
         if let Some(l) = s.losses.iter().find(|l| !LOSSES.contains(&l.as_str())) {
             return Err(format!(
                 "{at}.losses: unknown term `{l}` (expected one of {LOSSES:?})"
-            ));
-        }
-        if let Some(m) = s.freeze.iter().find(|m| !MODULES.contains(&m.as_str())) {
-            return Err(format!(
-                "{at}.freeze: unknown model part `{m}` (expected one of {MODULES:?})"
             ));
         }
     }
@@ -169,10 +213,60 @@ mod tests {
         assert!(check(&s).is_ok());
         assert!(check(&[stage("a", None), stage("b", None)]).is_err());
         let mut bad = stage("x", None);
-        bad.freeze = vec!["decodr".into()];
-        assert!(check(&[bad]).unwrap_err().contains("decodr"));
-        let mut bad = stage("x", None);
         bad.losses = vec!["actoin".into()];
         assert!(check(&[bad]).unwrap_err().contains("train.stages[0]"));
+    }
+
+    #[test]
+    fn freezing_by_module_name_drops_exactly_those_gradients() {
+        use burn::tensor::Distribution;
+        let device = Device::flex().autodiff();
+        device.seed(0);
+        let mut cfg = model::ModelConfig::tiny(model::Variant::from_name("slotvla_h2").unwrap())
+            .with_vocab_from(["put the bowl on the plate"]);
+        cfg.image_size = [32, 32];
+        let m = PolicyModel::new(&cfg, &device).unwrap();
+        let known = parts(&m);
+        for name in [
+            "encoder",
+            "slot_attention",
+            "relation",
+            "decoder",
+            "frame_offset",
+            "token_type",
+        ] {
+            assert!(known.contains(name), "{name} in {known:?}");
+        }
+        let mut frozen = stage("s", None);
+        frozen.freeze = vec!["slot_attention".into(), "frame_offset".into()];
+        assert!(check_freeze(std::slice::from_ref(&frozen), &m).is_ok());
+        let mut typo = stage("s", None);
+        typo.freeze = vec!["slot_ssm".into()];
+        let e = check_freeze(&[typo], &m).unwrap_err();
+        assert!(
+            e.contains("`slotvla_h2` model has no part `slot_ssm`"),
+            "{e}"
+        );
+
+        let images =
+            Tensor::<5>::random([1, 2, 3, 32, 32], Distribution::Uniform(0.0, 1.0), &device);
+        let ids = model::Tokenizer::new(&cfg.text).encode_batch(&["put the bowl"], &device);
+        let out = m.predict(images, ids, None).unwrap();
+        let grads = out.actions.sum().backward();
+        let mut grads = GradientsParams::from_grads(grads, &m);
+        let before = grads.len();
+        freeze(&m, &frozen, &mut grads);
+        let sa = m.tokens.slot_core().unwrap().slot_attention.num_params();
+        assert!(grads.len() < before);
+        // Every parameter tensor under slot_attention and the frame offsets is gone, no other.
+        struct Count(usize);
+        impl ModuleVisitor for Count {
+            fn visit_float<const D: usize>(&mut self, _: &Param<Tensor<D>>) {
+                self.0 += 1;
+            }
+        }
+        let mut c = Count(0);
+        m.tokens.slot_core().unwrap().slot_attention.visit(&mut c);
+        assert_eq!(before - grads.len(), c.0 + 1, "{sa} params");
     }
 }

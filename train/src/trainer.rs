@@ -21,7 +21,6 @@ use indicatif::{ProgressBar, ProgressStyle};
 use model::{Losses, ModelConfig, PolicyModel};
 use serde::{Deserialize, Serialize};
 
-use crate::backend;
 use crate::checkpoint::{self, STATE_FORMAT, TrainState};
 use crate::clip::clip_global_norm;
 use crate::config::{BackendKind, Config};
@@ -233,7 +232,7 @@ pub fn train(cfg: &Config, opts: &TrainOptions) -> Result<TrainSummary> {
     let cfg = resolve(cfg, opts);
     let run = run_dir(&cfg, opts);
     let t = cfg.train.clone();
-    let device = backend::device(cfg.backend.kind)?;
+    let device = model::backend::device(cfg.backend.kind)?;
     let ad = device.clone().autodiff();
 
     ensure_dataset(&cfg, opts.progress)?;
@@ -312,18 +311,12 @@ pub fn train(cfg: &Config, opts: &TrainOptions) -> Result<TrainSummary> {
         }
     };
     let start_step = state.step;
+    stages::check_freeze(&t.stages, &model).map_err(|m| config_error(&cfg, m))?;
 
-    // LeRobot layout: the resolved config next to the checkpoints; what eval needs.
+    // The policy's files (model::run, what eval reads) and, LeRobot-style, the resolved config.
+    let info = model::run::RunInfo::new(cfg.backend.kind, cfg.eval.tasks.clone());
+    model::run::write_policy(&run, &info, &mcfg, &data.processor)?;
     write_file(&run.join("config.toml"), &config_toml)?;
-    write_file(
-        &run.join("model.json"),
-        &serde_json::to_string_pretty(&mcfg).expect("serialises"),
-    )?;
-    let norm = data.train.action_norm();
-    write_file(
-        &run.join("action_stats.json"),
-        &serde_json::json!({"q01": norm.q01, "q99": norm.q99, "mask": norm.mask}).to_string(),
-    )?;
     let mut train_log = JsonlWriter::open(&run.join("metrics.jsonl"), state.step)?;
     let mut val_log = JsonlWriter::open(&run.join("val.jsonl"), state.step)?;
 

@@ -375,19 +375,36 @@ fn incompatible_checkpoint_exits_2() {
     assert_eq!(out.status.code(), Some(2));
 }
 
-/// Bits of every float parameter of one model part (`train::stages::MODULES`).
+/// Bits of every float parameter inside the modules named `part` (anywhere in the model tree,
+/// as a stage's `freeze` names them).
 fn part_bits(model: &PolicyModel, part: &str) -> Vec<Vec<u32>> {
-    struct Collect(Vec<Vec<u32>>);
-    impl ModuleVisitor for Collect {
+    struct Collect<'a> {
+        part: &'a str,
+        path: Vec<String>,
+        bits: Vec<Vec<u32>>,
+    }
+    impl ModuleVisitor for Collect<'_> {
+        fn enter_module(&mut self, name: &str, _: &str) {
+            self.path.push(name.into());
+        }
+        fn exit_module(&mut self, _: &str, _: &str) {
+            self.path.pop();
+        }
         fn visit_float<const D: usize>(&mut self, p: &Param<Tensor<D>>) {
-            let v = p.val().into_data().try_to_vec::<f32>().unwrap();
-            self.0.push(v.iter().map(|x| x.to_bits()).collect());
+            if self.path.iter().any(|n| n == self.part) {
+                let v = p.val().into_data().try_to_vec::<f32>().unwrap();
+                self.bits.push(v.iter().map(|x| x.to_bits()).collect());
+            }
         }
     }
-    let mut c = Collect(vec![]);
-    train::stages::visit_part(model, part, &mut c);
-    assert!(!c.0.is_empty(), "{part} has no parameters");
-    c.0
+    let mut c = Collect {
+        part,
+        path: vec![],
+        bits: vec![],
+    };
+    model.visit(&mut c);
+    assert!(!c.bits.is_empty(), "{part} has no parameters");
+    c.bits
 }
 
 fn checkpoint_model(run_dir: &Path, step: u64) -> PolicyModel {
@@ -396,7 +413,7 @@ fn checkpoint_model(run_dir: &Path, step: u64) -> PolicyModel {
             .unwrap();
     let path = run_dir
         .join("checkpoints")
-        .join(train::checkpoint::dir_name(step))
+        .join(model::run::checkpoint_name(step))
         .join("model.bpk");
     PolicyModel::load(&cfg, path, &Device::flex()).unwrap()
 }

@@ -1,0 +1,440 @@
+//! The one input path of a policy (LeRobot's processor idea): tokenizer, subgoal text, action
+//! normalisation with its mask, frame preparation and the assembly of model tensors, in one
+//! [`Processor`] that is saved into the run directory (`processor.json`, see [`crate::run`]).
+//!
+//! Training builds its [`WindowBatch`]es with [`Processor::batch`] from `data`'s window samples;
+//! the evaluator turns each environment observation into model inputs with
+//! [`Processor::step`] and model outputs into actions with [`Processor::unnormalize`]. Both
+//! prepare frames with `data::window::frame_chw` and read the goal as the policy observes it
+//! (`data::window::observed_progress`), so train and eval cannot disagree about an input.
+
+use burn::prelude::*;
+use data::{ActionNorm, GoalProgress, RgbImage, Vocab, WindowSample};
+use serde::{Deserialize, Serialize};
+
+use crate::config::{ModelConfig, TextConfig};
+use crate::error::{ModelError, Result};
+use crate::policy::WindowBatch;
+
+/// Format tag of `processor.json`.
+pub const PROCESSOR_FORMAT: &str = "libero-mem-rs/processor/1";
+
+/// Word-level tokenizer over the model's vocabulary (model.md §8): id 0 = padding, 1 = unknown,
+/// word i of the vocabulary = i + 2. Built on `data`'s [`Vocab`], the only word splitter.
+#[derive(Clone, Debug)]
+pub struct Tokenizer {
+    vocab: Vocab,
+    max_len: usize,
+}
+
+impl Tokenizer {
+    /// The tokenizer of a model's text config.
+    pub fn new(config: &TextConfig) -> Self {
+        let mut words = vec!["<pad>".to_string(), "<unk>".to_string()];
+        words.extend(config.vocab.iter().map(|w| w.to_lowercase()));
+        Tokenizer {
+            vocab: Vocab::from_words(words),
+            max_len: config.max_len,
+        }
+    }
+
+    /// Vocabulary size including the two special ids.
+    pub fn vocab_size(&self) -> usize {
+        self.vocab.len()
+    }
+
+    /// Token ids of `text`, cut or padded to exactly `max_len`.
+    pub fn encode(&self, text: &str) -> Vec<i64> {
+        let (ids, _) = self.vocab.encode(text, self.max_len);
+        ids.into_iter().map(i64::from).collect()
+    }
+
+    /// Token ids of several texts as a tensor.
+    ///
+    /// # Shapes
+    /// - output: `[texts.len(), max_len]`
+    pub fn encode_batch(&self, texts: &[&str], device: &Device) -> Tensor<2, Int> {
+        let data: Vec<i64> = texts.iter().flat_map(|t| self.encode(t)).collect();
+        Tensor::from_data(TensorData::new(data, [texts.len(), self.max_len]), device)
+    }
+}
+
+/// Which subgoal the model is given with each frame.
+#[derive(Serialize, Deserialize, Clone, Copy, Debug, PartialEq, Eq)]
+#[serde(rename_all = "snake_case")]
+pub enum SubgoalInput {
+    /// None (the model's own null subgoal).
+    None,
+    /// The pending subgoal's text, shared by every slot.
+    Pending,
+}
+
+impl SubgoalInput {
+    /// What the variant of `model` reads.
+    pub fn of(model: &ModelConfig) -> Self {
+        if model.variant.needs_subgoal_text() {
+            SubgoalInput::Pending
+        } else {
+            SubgoalInput::None
+        }
+    }
+}
+
+/// Everything [`Processor`] needs, as saved in `processor.json`.
+#[derive(Serialize, Deserialize, Clone, Debug, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct ProcessorConfig {
+    /// [`PROCESSOR_FORMAT`].
+    pub format: String,
+    /// Model input frame size `[H, W]` (square: frames are resized to it).
+    pub image_size: [usize; 2],
+    /// Text: vocabulary and token count.
+    pub text: TextConfig,
+    /// Action normalisation of the training data.
+    pub action: ActionNorm,
+    /// Which subgoal is fed.
+    pub subgoal: SubgoalInput,
+}
+
+/// One environment step as the policy sees it.
+#[derive(Clone, Copy, Debug)]
+pub struct StepObservation<'a> {
+    /// Agentview RGB, upright, any size (resized as training frames are).
+    pub agentview: &'a RgbImage,
+    /// Proprio state (eef position, axis-angle, gripper qpos).
+    pub state: [f32; 8],
+    /// The task instruction.
+    pub instruction: &'a str,
+    /// Goal progress as the environment reports it with this observation (None: unknown).
+    pub goal: Option<&'a GoalProgress>,
+}
+
+/// Model inputs of one step.
+#[derive(Clone, Debug)]
+pub struct StepInput {
+    /// Frame `[1, 3, H, W]` in [0, 1].
+    pub image: Tensor<4>,
+    /// Instruction ids `[1, L_txt]`.
+    pub instruction: Tensor<2, Int>,
+    /// Subgoal ids `[1, 1, L_sg]` (None when the model reads none).
+    pub subgoal: Option<Tensor<3, Int>>,
+}
+
+/// The policy's pre- and post-processing (see the module docs).
+#[derive(Clone, Debug)]
+pub struct Processor {
+    config: ProcessorConfig,
+    tokenizer: Tokenizer,
+}
+
+impl Processor {
+    /// The processor of `model` with the action normalisation of its training data.
+    pub fn new(model: &ModelConfig, action: ActionNorm) -> Self {
+        Processor::from_config(ProcessorConfig {
+            format: PROCESSOR_FORMAT.into(),
+            image_size: model.image_size,
+            text: model.text.clone(),
+            action,
+            subgoal: SubgoalInput::of(model),
+        })
+        .expect("a model config gives a valid processor")
+    }
+
+    /// A processor from its saved config.
+    pub fn from_config(config: ProcessorConfig) -> Result<Self> {
+        if config.format != PROCESSOR_FORMAT {
+            return Err(ModelError::Config(format!(
+                "processor format `{}`, expected `{PROCESSOR_FORMAT}`",
+                config.format
+            )));
+        }
+        let [h, w] = config.image_size;
+        if h == 0 || h != w {
+            return Err(ModelError::Config(format!(
+                "processor image_size {:?}: frames are square and non-empty",
+                config.image_size
+            )));
+        }
+        Ok(Processor {
+            tokenizer: Tokenizer::new(&config.text),
+            config,
+        })
+    }
+
+    /// Its saved form.
+    pub fn config(&self) -> &ProcessorConfig {
+        &self.config
+    }
+
+    /// The tokenizer.
+    pub fn tokenizer(&self) -> &Tokenizer {
+        &self.tokenizer
+    }
+
+    /// The action normalisation.
+    pub fn action_norm(&self) -> &ActionNorm {
+        &self.config.action
+    }
+
+    /// Whether `model` reads inputs the way this processor prepares them.
+    pub fn check_model(&self, model: &ModelConfig) -> Result<()> {
+        let c = &self.config;
+        if c.image_size != model.image_size
+            || c.text != model.text
+            || c.subgoal != SubgoalInput::of(model)
+        {
+            return Err(ModelError::Config(format!(
+                "the processor (image {:?}, {} words, subgoal {:?}) does not fit the `{}` model \
+                 (image {:?}, {} words, subgoal {:?})",
+                c.image_size,
+                c.text.vocab.len(),
+                c.subgoal,
+                model.variant.name(),
+                model.image_size,
+                model.text.vocab.len(),
+                SubgoalInput::of(model)
+            )));
+        }
+        Ok(())
+    }
+
+    /// The subgoal text fed with a frame whose observed goal is `goal` (None when the model
+    /// reads none; the empty text when the goal is unknown or complete).
+    pub fn subgoal_text<'g>(&self, goal: Option<&'g GoalProgress>) -> Option<&'g str> {
+        match self.config.subgoal {
+            SubgoalInput::None => None,
+            SubgoalInput::Pending => Some(goal.map_or("", |g| g.current_subgoal.as_str())),
+        }
+    }
+
+    /// An upright frame as model input `[3, H, W]` (values in [0, 1]).
+    pub fn frame(&self, img: &RgbImage) -> Result<Vec<f32>> {
+        if img.channels != 3 || img.data.len() != (img.width * img.height * 3) as usize {
+            return Err(ModelError::Input(format!(
+                "frame of {}×{}×{} with {} bytes",
+                img.height,
+                img.width,
+                img.channels,
+                img.data.len()
+            )));
+        }
+        Ok(data::window::frame_chw(
+            img.clone(),
+            self.config.image_size[0] as u32,
+        ))
+    }
+
+    /// Model inputs of one environment step.
+    ///
+    /// # Shapes
+    /// - output: image `[1, 3, H, W]`, instruction `[1, L_txt]`, subgoal `[1, 1, L_sg]`
+    pub fn step(&self, obs: &StepObservation, device: &Device) -> Result<StepInput> {
+        let [h, w] = self.config.image_size;
+        let image = Tensor::from_data(
+            TensorData::new(self.frame(obs.agentview)?, [1, 3, h, w]),
+            device,
+        );
+        let instruction = self.tokenizer.encode_batch(&[obs.instruction], device);
+        let subgoal = self.subgoal_text(obs.goal).map(|s| {
+            self.tokenizer
+                .encode_batch(&[s], device)
+                .unsqueeze_dim::<3>(1)
+        });
+        Ok(StepInput {
+            image,
+            instruction,
+            subgoal,
+        })
+    }
+
+    /// Training windows as one model batch: frames as `data` prepared them, the normalised
+    /// action chunks, masks, the instruction and the subgoal of every frame.
+    ///
+    /// # Shapes
+    /// - output: images `[B, T, 3, H, W]`, actions `[B, T, H_a, 7]`, frame mask `[B, T]`,
+    ///   action mask `[B, T, H_a, 7]`, instruction `[B, L_txt]`, subgoal `[B, T, 1, L_sg]`
+    pub fn batch(&self, samples: &[WindowSample], device: &Device) -> Result<WindowBatch> {
+        let first = samples
+            .first()
+            .ok_or_else(|| ModelError::Input("cannot batch zero samples".into()))?;
+        let (b, t) = (samples.len(), first.frame_mask.len());
+        let ha = first.action_mask.len() / t.max(1);
+        let [h, w] = self.config.image_size;
+        for s in samples {
+            if s.frame_mask.len() != t
+                || s.images.len() != t * 3 * h * w
+                || s.actions.len() != t * ha * 7
+                || s.action_mask.len() != t * ha
+            {
+                return Err(ModelError::Input(format!(
+                    "window of episode {} at step {}: {} frames, {} image values, {} actions; \
+                     expected {t} frames of 3×{h}×{w} and {ha}-step chunks",
+                    s.episode,
+                    s.t,
+                    s.frame_mask.len(),
+                    s.images.len(),
+                    s.actions.len()
+                )));
+            }
+        }
+        let cat = |f: &dyn Fn(&WindowSample) -> &[f32]| -> Vec<f32> {
+            samples.iter().flat_map(|s| f(s).iter().copied()).collect()
+        };
+        let images = cat(&|s| &s.images);
+        let actions = cat(&|s| &s.actions);
+        let frame: Vec<f32> = samples
+            .iter()
+            .flat_map(|s| s.frame_mask.iter().map(|&m| f32::from(u8::from(m))))
+            .collect();
+        let mut action_mask = Vec::with_capacity(b * t * ha * 7);
+        for s in samples {
+            for j in 0..t {
+                for k in 0..ha {
+                    let on = s.frame_mask[j] && s.action_mask[j * ha + k];
+                    action_mask.extend([f32::from(u8::from(on)); 7]);
+                }
+            }
+        }
+        let instructions: Vec<&str> = samples.iter().map(|s| s.instruction.as_str()).collect();
+        let subgoal = match self.config.subgoal {
+            SubgoalInput::None => None,
+            SubgoalInput::Pending => {
+                let texts: Vec<&str> = samples
+                    .iter()
+                    .flat_map(|s| {
+                        s.goals
+                            .iter()
+                            .map(|g| self.subgoal_text(Some(g)).unwrap_or(""))
+                    })
+                    .collect();
+                if texts.len() != b * t {
+                    return Err(ModelError::Input(format!(
+                        "{} goal entries for {b} windows of {t} frames",
+                        texts.len()
+                    )));
+                }
+                let l = self.config.text.max_len;
+                Some(
+                    self.tokenizer
+                        .encode_batch(&texts, device)
+                        .reshape([b, t, 1, l]),
+                )
+            }
+        };
+        Ok(WindowBatch {
+            images: Tensor::from_data(TensorData::new(images, [b, t, 3, h, w]), device),
+            actions: Tensor::from_data(TensorData::new(actions, [b, t, ha, 7]), device),
+            frame_mask: Tensor::from_data(TensorData::new(frame, [b, t]), device),
+            action_mask: Some(Tensor::from_data(
+                TensorData::new(action_mask, [b, t, ha, 7]),
+                device,
+            )),
+            instruction: self.tokenizer.encode_batch(&instructions, device),
+            subgoal,
+        })
+    }
+
+    /// A normalised action (model output) in the environment's units: the inverse of the
+    /// training targets' normalisation on its masked dimensions.
+    pub fn unnormalize(&self, a: [f32; 7]) -> [f32; 7] {
+        self.config.action.denormalize(&a)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::config::Variant;
+
+    fn cfg() -> TextConfig {
+        TextConfig {
+            vocab: vec![
+                "bowl".into(),
+                "on".into(),
+                "plate".into(),
+                "put".into(),
+                "the".into(),
+            ],
+            max_len: 6,
+        }
+    }
+
+    #[test]
+    fn tokenizer_maps_words_pads_and_cuts() {
+        let tok = Tokenizer::new(&cfg());
+        assert_eq!(tok.vocab_size(), 7);
+        assert_eq!(
+            tok.encode("Put the bowl on the PLATE."),
+            vec![5, 6, 2, 3, 6, 4]
+        );
+        assert_eq!(tok.encode("put the mug"), vec![5, 6, 1, 0, 0, 0]);
+        assert_eq!(tok.encode("the the the the the the the").len(), 6);
+    }
+
+    fn norm() -> ActionNorm {
+        ActionNorm {
+            q01: [-2.0; 7],
+            q99: [2.0; 7],
+            mask: [true, true, true, true, true, true, false],
+        }
+    }
+
+    #[test]
+    fn unnormalize_inverts_the_training_targets_and_leaves_the_gripper() {
+        let model = ModelConfig::tiny(Variant::from_name("slotvla_h1").unwrap());
+        let p = Processor::new(&model, norm());
+        let a = [1.5, -0.3, 0.0, 2.0, -2.0, 0.7, -1.0];
+        let n = norm().normalize(&a);
+        let back = p.unnormalize(n);
+        for (x, y) in back.iter().zip(a) {
+            assert!((x - y).abs() < 1e-5, "{back:?}");
+        }
+        assert_eq!(
+            p.unnormalize([1.0, -1.0, 0.0, 0.5, 0.0, 0.0, 0.3]),
+            [2.0, -2.0, 0.0, 1.0, 0.0, 0.0, 0.3]
+        );
+    }
+
+    #[test]
+    fn config_round_trips_and_bad_configs_are_errors() {
+        let model = ModelConfig::tiny(Variant::from_name("e_slotssm_oracle").unwrap())
+            .with_vocab_from(["put the bowl on the plate"]);
+        let p = Processor::new(&model, norm());
+        assert_eq!(p.config().subgoal, SubgoalInput::Pending);
+        let json = serde_json::to_string(p.config()).unwrap();
+        let back = Processor::from_config(serde_json::from_str(&json).unwrap()).unwrap();
+        assert_eq!(back.config(), p.config());
+        back.check_model(&model).unwrap();
+        let other = ModelConfig::tiny(Variant::from_name("e_slotssm").unwrap())
+            .with_vocab_from(["put the bowl on the plate"]);
+        assert!(back.check_model(&other).is_err());
+        let mut bad = p.config().clone();
+        bad.image_size = [64, 32];
+        assert!(Processor::from_config(bad).is_err());
+        let mut bad = p.config().clone();
+        bad.format = "other".into();
+        assert!(Processor::from_config(bad).is_err());
+    }
+
+    #[test]
+    fn subgoal_text_follows_the_variant() {
+        let goal = GoalProgress {
+            current_subgoal: "put the bowl on the plate".into(),
+            ..Default::default()
+        };
+        let plain = Processor::new(
+            &ModelConfig::tiny(Variant::from_name("e_slotssm").unwrap()),
+            norm(),
+        );
+        assert_eq!(plain.subgoal_text(Some(&goal)), None);
+        let oracle = Processor::new(
+            &ModelConfig::tiny(Variant::from_name("e_slotssm_oracle").unwrap()),
+            norm(),
+        );
+        assert_eq!(
+            oracle.subgoal_text(Some(&goal)),
+            Some("put the bowl on the plate")
+        );
+        assert_eq!(oracle.subgoal_text(None), Some(""));
+    }
+}

@@ -1,0 +1,182 @@
+//! Embodied-SlotSSM (model.md §2–§7): encoder → slot attention → SlotSSM → windowed head and
+//! slot fusion with the subgoal → relation tokens → decoder. Its memory is the SlotSSM state
+//! (constant size for any episode length) and the last slots.
+
+use burn::module::Param;
+use burn::prelude::*;
+use burn::tensor::Distribution;
+
+use super::{Carry, Memory, Shared, SlotCore, WindowParts, WindowTokens};
+use crate::config::ModelConfig;
+use crate::error::{ModelError, Result};
+use crate::heads::{SlotFusion, WindowHead};
+use crate::slot_ssm::{SlotSsm, SlotSsmState};
+
+/// Embodied-SlotSSM's token builder.
+#[derive(Module, Debug)]
+pub struct SlotSsmTokens {
+    /// Slot attention, relation tokens, projection.
+    pub core: SlotCore,
+    /// SlotSSM.
+    pub slot_ssm: SlotSsm,
+    /// Windowed head of L_win.
+    pub window_head: WindowHead,
+    /// Slot fusion of s_t, ŝ_{t+1} and the subgoal.
+    pub fusion: SlotFusion,
+    /// Learned null subgoal `[D_txt]`, given to every slot when the model reads no oracle
+    /// subgoal text (absent when it does).
+    pub null_subgoal: Option<Param<Tensor<1>>>,
+    /// Cross-attention from slots to patches inside the SlotSSM.
+    pub cross_attention: bool,
+}
+
+impl SlotSsmTokens {
+    /// Builds Embodied-SlotSSM of `config`.
+    pub fn new(config: &ModelConfig, device: &Device) -> Self {
+        let d = config.slots.dim;
+        let w = config.decoder.width;
+        SlotSsmTokens {
+            core: SlotCore::new(config, device),
+            slot_ssm: SlotSsm::new(config, device),
+            window_head: WindowHead::new(d, config.window.past + config.window.future, device),
+            fusion: SlotFusion::new(d, w, device),
+            null_subgoal: (!config.variant.needs_subgoal_text()).then(|| {
+                Param::from_tensor(Tensor::random([w], Distribution::Normal(0.0, 1.0), device))
+            }),
+            cross_attention: config.ssm.cross_attention,
+        }
+    }
+
+    /// Subgoal embeddings g per slot.
+    ///
+    /// # Shapes
+    /// - subgoal: `[N, G, L_sg]`, G ∈ {1, K}
+    /// - output: `[N, K, D_txt]`
+    fn subgoal_embedding(
+        &self,
+        subgoal: Option<Tensor<3, Int>>,
+        n: usize,
+        shared: Shared,
+        device: &Device,
+    ) -> Result<Tensor<3>> {
+        let k = self.core.slot_attention.num_slots();
+        let [_, w] = shared.token_type.dims();
+        match (subgoal, &self.null_subgoal) {
+            (_, Some(null)) => Ok(null
+                .val()
+                .reshape([1, 1, w])
+                .repeat_dim(0, n)
+                .repeat_dim(1, k)),
+            (Some(ids), None) => {
+                let [n2, g, l] = ids.dims();
+                if n2 != n || (g != 1 && g != k) {
+                    return Err(ModelError::Input(format!(
+                        "subgoal ids have shape {:?}, expected [{n}, 1 or {k}, L]",
+                        ids.dims()
+                    )));
+                }
+                let e = shared
+                    .text
+                    .pooled(ids.reshape([n * g, l]))
+                    .reshape([n, g, w]);
+                Ok(if g == 1 { e.repeat_dim(1, k) } else { e })
+            }
+            // Oracle model without a subgoal: every slot gets the empty text (zeros).
+            (None, None) => Ok(Tensor::zeros([n, k, w], device)),
+        }
+    }
+
+    fn check_state(&self, state: &SlotSsmState, b: usize, device: &Device) -> Result<()> {
+        let k = self.core.slot_attention.num_slots();
+        let want = self.slot_ssm.zero_state(b, k, device);
+        let ok = state.blocks.len() == want.blocks.len()
+            && state
+                .blocks
+                .iter()
+                .zip(&want.blocks)
+                .all(|(s, z)| s.h.dims() == z.h.dims() && s.conv.dims() == z.conv.dims());
+        if ok {
+            Ok(())
+        } else {
+            Err(ModelError::Input(
+                "carried SlotSSM state does not match the model and batch".into(),
+            ))
+        }
+    }
+
+    /// # Shapes
+    /// - feats: `[B, T, M, D_f]`; subgoal: `[B, T, G, L_sg]`; output: see [`WindowTokens`]
+    pub fn window(
+        &self,
+        feats: Tensor<4>,
+        subgoal: Option<Tensor<4, Int>>,
+        carry: Carry,
+        shared: Shared,
+    ) -> Result<WindowTokens> {
+        let [b, t, m, d_f] = feats.dims();
+        let n = b * t;
+        let device = feats.device();
+        if let Some(state) = &carry.ssm {
+            self.check_state(state, b, &device)?;
+        }
+        let (slots, masks, last) = self.core.window(feats.clone(), carry.slots)?;
+        let [_, _, k, d] = slots.dims();
+        let ssm_feats = self.cross_attention.then(|| feats.clone());
+        let (pred, state) = self.slot_ssm.forward(slots.clone(), ssm_feats, carry.ssm);
+        let window = self.window_head.forward(pred.clone(), slots.clone());
+        let sub = subgoal.map(|s| {
+            let [_, _, g, l] = s.dims();
+            s.reshape([n, g, l])
+        });
+        let g = self.subgoal_embedding(sub, n, shared, &device)?;
+        let z = self.fusion.forward(
+            slots.clone().reshape([n, k, d]),
+            pred.clone().reshape([n, k, d]),
+            g,
+        );
+        let tokens = self.core.tokens(feats.reshape([n, m, d_f]), z, shared);
+        Ok(WindowTokens {
+            tokens,
+            pad: None,
+            parts: WindowParts {
+                slots: Some(slots),
+                masks: Some(masks),
+                predicted: Some(pred),
+                window: Some(window),
+            },
+            carry: Carry {
+                slots: Some(last),
+                ssm: Some(state.detach()),
+            },
+        })
+    }
+
+    /// # Shapes
+    /// - feats: `[1, M, D_f]`; subgoal: `[1, G, L_sg]`; output: `[1, L + K, D_dec]`
+    pub fn step(
+        &self,
+        feats: Tensor<3>,
+        subgoal: Option<Tensor<3, Int>>,
+        memory: &mut Memory,
+        shared: Shared,
+    ) -> Result<Tensor<3>> {
+        let device = feats.device();
+        let (slots, masks) = self
+            .core
+            .slot_attention
+            .step(feats.clone(), memory.slots.take());
+        memory.slots = Some(slots.clone());
+        memory.masks = Some(masks);
+        let k = self.core.slot_attention.num_slots();
+        let state = memory
+            .ssm
+            .take()
+            .unwrap_or_else(|| self.slot_ssm.zero_state(1, k, &device));
+        let ssm_feats = self.cross_attention.then(|| feats.clone());
+        let (pred, state) = self.slot_ssm.step(slots.clone(), ssm_feats, state);
+        memory.ssm = Some(state);
+        let g = self.subgoal_embedding(subgoal, 1, shared, &device)?;
+        let z = self.fusion.forward(slots, pred, g);
+        Ok(self.core.tokens(feats, z, shared))
+    }
+}

@@ -1,0 +1,87 @@
+//! What every slot variant shares (model.md §2, §7, L_sa): slot attention with temporally
+//! propagated initialisation, the relation encoder, the projection of slot and relation tokens
+//! to the decoder width, and the optional slot decoder of L_sa.
+
+use burn::nn::{Linear, LinearConfig};
+use burn::prelude::*;
+
+use super::{Shared, TYPE_RELATION, TYPE_SLOT};
+use crate::config::ModelConfig;
+use crate::error::{ModelError, Result};
+use crate::heads::SlotDecoder;
+use crate::relation::RelationEncoder;
+use crate::slot_attention::SlotAttention;
+
+/// Slot attention, relation tokens and their projection to the decoder.
+#[derive(Module, Debug)]
+pub struct SlotCore {
+    /// Slot attention.
+    pub slot_attention: SlotAttention,
+    /// Relation encoder.
+    pub relation: RelationEncoder,
+    /// Slot / relation tokens to the decoder width `[D, D_dec]`.
+    pub token_proj: Linear,
+    /// Slot decoder of L_sa (absent when λ_sa = 0).
+    pub slot_decoder: Option<SlotDecoder>,
+}
+
+impl SlotCore {
+    /// Builds the slot machinery of `config`.
+    pub fn new(config: &ModelConfig, device: &Device) -> Self {
+        SlotCore {
+            slot_attention: SlotAttention::new(config, device),
+            relation: RelationEncoder::new(config, device),
+            token_proj: LinearConfig::new(config.slots.dim, config.decoder.width).init(device),
+            slot_decoder: config.has_sa_decoder().then(|| {
+                SlotDecoder::new(
+                    config.num_patches(),
+                    config.slots.dim,
+                    config.loss.sa_hidden,
+                    config.sa_target_dim(),
+                    device,
+                )
+            }),
+        }
+    }
+
+    /// Slots of a window that continues from `prev` (the carried last slots).
+    ///
+    /// # Shapes
+    /// - feats: `[B, T, M, D_f]`; prev: `[B, K, D]`
+    /// - output: (slots `[B, T, K, D]`, masks `[B, T, K, M]`, last slots `[B, K, D]` detached)
+    pub fn window(
+        &self,
+        feats: Tensor<4>,
+        prev: Option<Tensor<3>>,
+    ) -> Result<(Tensor<4>, Tensor<4>, Tensor<3>)> {
+        let [b, t, _, _] = feats.dims();
+        let (k, d) = (self.slot_attention.num_slots(), self.slot_attention.dim());
+        if let Some(p) = &prev
+            && p.dims() != [b, k, d]
+        {
+            return Err(ModelError::Input(format!(
+                "carried slots {:?}, expected [{b}, {k}, {d}]",
+                p.dims()
+            )));
+        }
+        let (slots, masks) = self.slot_attention.forward(feats, prev);
+        let last = slots
+            .clone()
+            .narrow(1, t - 1, 1)
+            .squeeze_dim::<3>(1)
+            .detach();
+        Ok((slots, masks, last))
+    }
+
+    /// Slot and relation tokens of single frames for the decoder.
+    ///
+    /// # Shapes
+    /// - feats: `[N, M, D_f]`; z: `[N, K, D]`
+    /// - output: `[N, L + K, D_dec]` (relation tokens first)
+    pub fn tokens(&self, feats: Tensor<3>, z: Tensor<3>, shared: Shared) -> Tensor<3> {
+        let r = self.relation.forward(feats, z.clone());
+        let r = self.token_proj.forward(r) + shared.type_embedding(TYPE_RELATION);
+        let z = self.token_proj.forward(z) + shared.type_embedding(TYPE_SLOT);
+        Tensor::cat(vec![r, z], 1)
+    }
+}

@@ -1,0 +1,80 @@
+//! SlotVLA(h) (model.md §9): encoder → slot attention → z = Linear(s) → relation tokens; the
+//! decoder sees the slot and relation tokens of the last h frames (h = 1: Markovian).
+
+use burn::nn::{Linear, LinearConfig};
+use burn::prelude::*;
+
+use super::{Carry, History, Memory, Shared, SlotCore, WindowParts, WindowTokens};
+use crate::config::ModelConfig;
+use crate::error::Result;
+
+/// SlotVLA's token builder.
+#[derive(Module, Debug)]
+pub struct SlotVlaTokens {
+    /// Slot attention, relation tokens, projection.
+    pub core: SlotCore,
+    /// z = Linear(s) `[D, D]`.
+    pub slot_proj: Linear,
+    /// Frame-offset embeddings (h > 1).
+    pub history: Option<History>,
+}
+
+impl SlotVlaTokens {
+    /// Builds SlotVLA of `config` (history h from its variant).
+    pub fn new(config: &ModelConfig, device: &Device) -> Self {
+        let d = config.slots.dim;
+        SlotVlaTokens {
+            core: SlotCore::new(config, device),
+            slot_proj: LinearConfig::new(d, d).init(device),
+            history: History::new(config.variant.history(), config.decoder.width, device),
+        }
+    }
+
+    /// # Shapes
+    /// - feats: `[B, T, M, D_f]`; output: see [`WindowTokens`]
+    pub fn window(&self, feats: Tensor<4>, carry: Carry, shared: Shared) -> Result<WindowTokens> {
+        let [b, t, m, d_f] = feats.dims();
+        let (slots, masks, last) = self.core.window(feats.clone(), carry.slots)?;
+        let [_, _, k, d] = slots.dims();
+        let z = self.slot_proj.forward(slots.clone().reshape([b * t, k, d]));
+        let tokens = self.core.tokens(feats.reshape([b * t, m, d_f]), z, shared);
+        let (tokens, pad) = match &self.history {
+            Some(h) => {
+                let (x, pad) = h.window(tokens, b, t);
+                (x, Some(pad))
+            }
+            None => (tokens, None),
+        };
+        Ok(WindowTokens {
+            tokens,
+            pad,
+            parts: WindowParts {
+                slots: Some(slots),
+                masks: Some(masks),
+                ..Default::default()
+            },
+            carry: Carry {
+                slots: Some(last),
+                ssm: None,
+            },
+        })
+    }
+
+    /// # Shapes
+    /// - feats: `[1, M, D_f]`; output: `[1, V, D_dec]`
+    pub fn step(&self, feats: Tensor<3>, memory: &mut Memory, shared: Shared) -> Tensor<3> {
+        let (slots, masks) = self
+            .core
+            .slot_attention
+            .step(feats.clone(), memory.slots.take());
+        memory.slots = Some(slots.clone());
+        memory.masks = Some(masks);
+        let tokens = self
+            .core
+            .tokens(feats, self.slot_proj.forward(slots), shared);
+        match &self.history {
+            Some(h) => h.step(tokens, &mut memory.history),
+            None => tokens,
+        }
+    }
+}
