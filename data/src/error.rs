@@ -98,8 +98,8 @@ impl DataError {
         }
     }
 
-    /// Process exit code for this error: 2 for bad input, 1 otherwise.
+    /// Process exit code for this error ([`crate::exit`]): 2 for bad input, 1 otherwise.
     pub fn exit_code(&self) -> i32 {
-        if self.is_bad_input() { 2 } else { 1 }
+        crate::exit::status(self.is_bad_input()) as i32
     }
 }

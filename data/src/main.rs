@@ -286,13 +286,6 @@ fn main() -> ExitCode {
     let cli = Cli::parse();
     match run(cli) {
         Ok(()) => ExitCode::SUCCESS,
-        Err(e) => {
-            eprintln!("error: {e:#}");
-            let code = e
-                .downcast_ref::<DataError>()
-                .map(|d| d.exit_code())
-                .unwrap_or(1);
-            ExitCode::from(code as u8)
-        }
+        Err(e) => data::exit::report::<DataError>(&e),
     }
 }

@@ -26,7 +26,7 @@ pub mod viz;
 
 use std::path::{Path, PathBuf};
 use std::sync::Mutex;
-use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
+use std::sync::atomic::{AtomicUsize, Ordering};
 
 use sim::record::Recorder;
 use sim::task::TaskSpec;
@@ -81,15 +81,22 @@ pub enum EvalError {
 }
 
 impl EvalError {
-    /// Process exit status for this error: 2 for bad input (arguments, tasks, run directories,
-    /// results files), 1 otherwise.
+    /// Process exit status for this error ([`data::exit`]): 2 for bad input, 1 otherwise.
     pub fn exit_code(&self) -> u8 {
+        data::exit::status(data::exit::BadInput::is_bad_input(self))
+    }
+}
+
+impl data::exit::BadInput for EvalError {
+    /// Arguments, tasks, run directories, results files, malformed data.
+    fn is_bad_input(&self) -> bool {
         match self {
             EvalError::Task(_)
             | EvalError::Argument(_)
             | EvalError::Run { .. }
-            | EvalError::Results { .. } => 2,
-            _ => 1,
+            | EvalError::Results { .. } => true,
+            EvalError::Data(d) => d.is_bad_input(),
+            _ => false,
         }
     }
 }
@@ -344,7 +351,7 @@ pub fn evaluate(
     let mut rows = Vec::new();
     let mut all = Vec::new();
     for (ti, task) in tasks.iter().enumerate() {
-        let init = if libero_protocol(task, cfg) {
+        let init_states = if libero_protocol(task, cfg) {
             let pack = sim::pack::LiberoPack::locate_default()
                 .map_err(|e| EvalError::Argument(e.to_string()))?;
             Some(
@@ -355,68 +362,44 @@ pub fn evaluate(
             None
         };
         let results = Mutex::new(Vec::new());
-        let next = AtomicUsize::new(0);
-        let stop = AtomicBool::new(false);
-        let worker = || -> Result<(), EvalError> {
-            let mut policy = make()?;
-            let mut env = env_for(task, policy.as_ref(), cfg)?;
-            loop {
-                let k = next.fetch_add(1, Ordering::SeqCst);
-                if k >= cfg.episodes || stop.load(Ordering::SeqCst) {
-                    return Ok(());
-                }
-                let outputs = RolloutOutputs {
-                    record: cfg.record.as_ref().map(|d| {
-                        d.join(task_slug(&task.id))
-                            .join(format!("episode_{k:06}.mcap"))
-                    }),
-                    viz: cfg.viz.clone().filter(|_| ti == 0 && k == 0),
-                    viz_every: cfg.viz_every,
-                };
-                let r = run_episode(
-                    &mut env,
-                    task,
-                    policy.as_mut(),
-                    cfg,
-                    k,
-                    &outputs,
-                    init.as_ref(),
-                );
-                let r = match r {
-                    Ok(r) => r,
-                    Err(e) => {
-                        stop.store(true, Ordering::SeqCst);
-                        return Err(e);
-                    }
-                };
-                let mut guard = results.lock().unwrap_or_else(|p| p.into_inner());
-                guard.push(r);
-                let n = guard.len();
-                progress(&Progress {
-                    task: task.id.clone(),
-                    done: done.fetch_add(1, Ordering::SeqCst) + 1,
-                    total,
-                    completion: 100.0 * guard.iter().map(EpisodeResult::tiered).sum::<f64>()
-                        / n as f64,
-                    successes: guard.iter().filter(|e| e.success).count(),
-                });
-            }
+        let init = || -> Result<_, EvalError> {
+            let policy = make()?;
+            let env = env_for(task, policy.as_ref(), cfg)?;
+            Ok((policy, env))
         };
-        let workers = cfg.workers.min(cfg.episodes);
-        let outcomes: Vec<Result<(), EvalError>> = std::thread::scope(|s| {
-            let handles: Vec<_> = (0..workers).map(|_| s.spawn(worker)).collect();
-            handles
-                .into_iter()
-                .map(|h| {
-                    h.join().unwrap_or_else(|_| {
-                        Err(EvalError::Argument("an evaluation worker panicked".into()))
-                    })
-                })
-                .collect()
-        });
-        for o in outcomes {
-            o?;
-        }
+        let work = |(policy, env): &mut (Box<dyn Policy>, Env), k: usize| {
+            let outputs = RolloutOutputs {
+                record: cfg.record.as_ref().map(|d| {
+                    d.join(task_slug(&task.id))
+                        .join(format!("episode_{k:06}.mcap"))
+                }),
+                viz: cfg.viz.clone().filter(|_| ti == 0 && k == 0),
+                viz_every: cfg.viz_every,
+            };
+            let r = run_episode(
+                env,
+                task,
+                policy.as_mut(),
+                cfg,
+                k,
+                &outputs,
+                init_states.as_ref(),
+            )?;
+            let mut guard = results.lock().unwrap_or_else(|p| p.into_inner());
+            guard.push(r);
+            let n = guard.len();
+            progress(&Progress {
+                task: task.id.clone(),
+                done: done.fetch_add(1, Ordering::SeqCst) + 1,
+                total,
+                completion: 100.0 * guard.iter().map(EpisodeResult::tiered).sum::<f64>() / n as f64,
+                successes: guard.iter().filter(|e| e.success).count(),
+            });
+            Ok(())
+        };
+        data::pool::for_each(cfg.episodes, cfg.workers, init, work, || {
+            EvalError::Argument("an evaluation worker panicked".into())
+        })?;
         let mut eps = results.into_inner().unwrap_or_else(|p| p.into_inner());
         eps.sort_by_key(|e| e.episode);
         rows.push(summarize(&task.id, &eps));

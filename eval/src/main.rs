@@ -137,13 +137,7 @@ fn main() -> ExitCode {
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,
-        Err(e) => {
-            eprintln!("error: {e:#}");
-            let code = e
-                .downcast_ref::<EvalError>()
-                .map_or(1, EvalError::exit_code);
-            ExitCode::from(code)
-        }
+        Err(e) => data::exit::report::<EvalError>(&e),
     }
 }
 

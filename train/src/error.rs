@@ -65,9 +65,16 @@ impl TrainError {
         }
     }
 
-    /// Exit status of the binary: 2 for bad input (config, arguments, missing dataset,
-    /// unavailable backend, incompatible checkpoint), 1 otherwise.
+    /// Exit status of the binary ([`data::exit`]): 2 for bad input, 1 otherwise.
     pub fn exit_code(&self) -> i32 {
+        data::exit::status(data::exit::BadInput::is_bad_input(self)) as i32
+    }
+}
+
+impl data::exit::BadInput for TrainError {
+    /// Config, arguments, a missing dataset, an unavailable backend, an incompatible checkpoint,
+    /// a bad run directory, malformed data.
+    fn is_bad_input(&self) -> bool {
         match self {
             TrainError::Config { .. }
             | TrainError::Usage(_)
@@ -77,8 +84,9 @@ impl TrainError {
                 model::ModelError::BackendUnavailable { .. }
                 | model::ModelError::Run { .. }
                 | model::ModelError::Config(_),
-            ) => 2,
-            _ => 1,
+            ) => true,
+            TrainError::Data(d) => d.is_bad_input(),
+            _ => false,
         }
     }
 }

@@ -75,13 +75,6 @@ fn main() -> ExitCode {
             );
             ExitCode::SUCCESS
         }
-        Err(e) => {
-            let err = anyhow::Error::new(e);
-            eprintln!("error: {err:#}");
-            let code = err
-                .downcast_ref::<train::TrainError>()
-                .map_or(1, train::TrainError::exit_code);
-            ExitCode::from(code as u8)
-        }
+        Err(e) => data::exit::report::<train::TrainError>(&anyhow::Error::new(e)),
     }
 }
