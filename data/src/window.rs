@@ -290,8 +290,40 @@ impl WindowDataset {
         let &(k, t) = self.samples.get(i).ok_or_else(|| {
             DataError::Argument(format!("sample {i} out of range 0..{}", self.samples.len()))
         })?;
-        let (episode, r) = &self.readers[k as usize];
-        let (t, n) = (t as usize, r.len());
+        let aug_seed = mix(self.cfg.seed ^ mix(epoch ^ mix(i as u64)));
+        self.window(k as usize, t as usize, aug_seed)
+    }
+
+    /// Episodes of the split.
+    pub fn num_episodes(&self) -> usize {
+        self.readers.len()
+    }
+
+    /// Steps of episode `k` of the split.
+    pub fn episode_len(&self, k: usize) -> usize {
+        self.readers[k].1.len()
+    }
+
+    /// A chunk of episode `k` of the split (position in the split, not the index): the T =
+    /// p + 1 + q frames from `start`, for training with memory carried from chunk to chunk.
+    /// Frames past the episode end repeat its last frame and are masked. The augmentation is
+    /// drawn per (seed, epoch, episode), so every chunk of an episode pass looks the same.
+    pub fn chunk(&self, k: usize, start: usize, epoch: u64) -> Result<WindowSample> {
+        if k >= self.readers.len() || start >= self.episode_len(k) {
+            return Err(DataError::Argument(format!(
+                "chunk at step {start} of episode {k}: out of range ({} episodes)",
+                self.readers.len()
+            )));
+        }
+        let aug_seed = mix(self.cfg.seed ^ mix(epoch ^ mix((k as u64) | (1 << 63))));
+        self.window(k, start + self.cfg.past, aug_seed)
+    }
+
+    /// The window of episode `k` (position in the split) centred at step `t` (which may lie
+    /// past the end: those frames are masked).
+    fn window(&self, k: usize, t: usize, aug_seed: u64) -> Result<WindowSample> {
+        let (episode, r) = &self.readers[k];
+        let n = r.len();
         let c = &self.cfg;
         let tl = c.len();
         let frame_steps: Vec<usize> = (0..tl)
@@ -312,7 +344,7 @@ impl WindowDataset {
         let before = (lo > first).then(|| all[0].progress.clone());
         let raw = &all[lo - first..];
 
-        let mut rng = ChaCha8Rng::seed_from_u64(mix(c.seed ^ mix(epoch ^ mix(i as u64))));
+        let mut rng = ChaCha8Rng::seed_from_u64(aug_seed);
         let aug = c.augment.as_ref().map(|a| AugParams::draw(a, &mut rng));
         let s = c.image_size as usize;
         let decode = |which: bool, f: usize| -> Result<Vec<f32>> {

@@ -221,3 +221,62 @@ fn zero_jitter_augmentation_is_identity() {
         .fold(0f32, f32::max);
     assert!(max < 1e-5, "max difference {max}");
 }
+
+#[test]
+fn chunks_walk_an_episode_and_mask_past_its_end() {
+    let (dir, eps) = dataset(&[10, 7]);
+    let cfg = WindowConfig {
+        past: 3,
+        future: 0,
+        chunk: 2,
+        image_size: 16,
+        ..Default::default()
+    };
+    let ds = WindowDataset::open(dir.path(), Split::Train, cfg.clone()).unwrap();
+    assert_eq!(ds.num_episodes(), 2);
+    assert_eq!((ds.episode_len(0), ds.episode_len(1)), (10, 7));
+    // A chunk from step 4 is the window ending at step 7.
+    let c = ds.chunk(0, 4, 0).unwrap();
+    assert_eq!(c.frame_steps, vec![4, 5, 6, 7]);
+    assert!(c.frame_mask.iter().all(|m| *m));
+    assert_eq!(c, ds.get(7).unwrap());
+    // The last chunk of episode 1 (steps 4..8) runs past its end: masked, last frame repeated.
+    let c = ds.chunk(1, 4, 0).unwrap();
+    assert_eq!(c.frame_steps, vec![4, 5, 6, 6]);
+    assert_eq!(c.frame_mask, vec![true, true, true, false]);
+    assert_eq!(c.goals[1], eps[1][4].progress);
+    assert!(ds.chunk(1, 7, 0).is_err());
+    assert!(ds.chunk(2, 0, 0).is_err());
+    // With augmentation, every chunk of one episode pass is augmented alike.
+    let aug = WindowDataset::open(
+        dir.path(),
+        Split::Train,
+        WindowConfig {
+            augment: Some(Augment::default()),
+            seed: 3,
+            ..cfg
+        },
+    )
+    .unwrap();
+    let plain = |start: usize| ds.chunk(0, start, 0).unwrap().images;
+    let (a0, a4) = (aug.chunk(0, 0, 0).unwrap(), aug.chunk(0, 4, 0).unwrap());
+    // The same step seen through two chunk starts gets the same augmentation.
+    let a2 = aug.chunk(0, 2, 0).unwrap();
+    let frame = |s: &WindowSample, j: usize| s.images[j * 3 * 256..(j + 1) * 3 * 256].to_vec();
+    assert_eq!(
+        frame(&a0, 2),
+        frame(&a2, 0),
+        "step 2 augmented alike in both chunks"
+    );
+    assert_eq!(
+        frame(&a2, 2),
+        frame(&a4, 0),
+        "step 4 augmented alike in both chunks"
+    );
+    assert_ne!(a0.images, plain(0));
+    assert_ne!(
+        aug.chunk(0, 0, 1).unwrap().images,
+        a0.images,
+        "another pass, another draw"
+    );
+}

@@ -124,6 +124,17 @@ pub struct SlotConfig {
     pub iters_first: usize,
     /// Iterations on later frames (initialised from the previous frame's slots).
     pub iters_later: usize,
+    /// Layer-normalise (no affine) the previous frame's slots before they initialise the next
+    /// frame [C]: the GRU keeps its state bounded but the residual MLP adds to it every frame, so
+    /// over an episode of hundreds of frames the carried slots grow without bound (measured:
+    /// episode-long training diverges through L_win without it). Windows of a few frames from
+    /// Q₀ never show it.
+    #[serde(default = "normalize_carried_default")]
+    pub normalize_carried: bool,
+}
+
+fn normalize_carried_default() -> bool {
+    true
 }
 
 /// SlotSSM stack and its Mamba mixer (model.md §4).
@@ -277,6 +288,7 @@ impl ModelConfig {
                 dim: 64,
                 iters_first: 3,
                 iters_later: 1,
+                normalize_carried: true,
             },
             ssm: SsmConfig {
                 blocks: 2,
@@ -335,6 +347,7 @@ impl ModelConfig {
                 dim: 512,
                 iters_first: 3,
                 iters_later: 1,
+                normalize_carried: true,
             },
             ssm: SsmConfig {
                 blocks: 3,

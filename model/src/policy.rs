@@ -647,6 +647,86 @@ mod tests {
         assert!(model.forward_from(&y, carry).is_err());
     }
 
+    /// Truncated BPTT over consecutive chunks (model.md §10): two lanes walk episodes chunk by
+    /// chunk with the carried memory; lane 1 finishes an episode and starts another (a fresh
+    /// lane). Every frame's actions equal a streaming policy run over its own episode.
+    fn chunks_equal_streaming(cfg: ModelConfig) {
+        let (_guard, device) = test_device();
+        device.seed(4);
+        let model = PolicyModel::new(&cfg, &device).unwrap();
+        let tok = Tokenizer::new(&cfg.text);
+        let [h, w] = cfg.image_size;
+        let frames = |n: usize| {
+            Tensor::<5>::random([1, n, 3, h, w], Distribution::Uniform(0.0, 1.0), &device)
+        };
+        // Lane 0: one episode of 8 frames; lane 1: episodes of 4 and 4 frames. Chunks of 2.
+        let (e0, e1a, e1b) = (frames(8), frames(4), frames(4));
+        let lane1 = Tensor::cat(vec![e1a.clone(), e1b.clone()], 1);
+        let instr = tok.encode_batch(&[INSTRUCTIONS[0], INSTRUCTIONS[0]], &device);
+        let mut carry = Carry::default();
+        let mut chunked = [vec![], vec![]];
+        for c in 0..4 {
+            let images = Tensor::cat(
+                vec![
+                    e0.clone().narrow(1, 2 * c, 2),
+                    lane1.clone().narrow(1, 2 * c, 2),
+                ],
+                0,
+            );
+            if c == 2 {
+                let fresh = TensorData::new(vec![false, true], [2]);
+                carry = carry.with_fresh(Tensor::from_data(fresh, &device));
+            }
+            let (out, next) = model
+                .predict_from(images, instr.clone(), None, carry)
+                .unwrap();
+            carry = next;
+            for (lane, acts) in chunked.iter_mut().enumerate() {
+                acts.push(out.actions.clone().narrow(0, lane, 1));
+            }
+        }
+        let streamed = |episode: Tensor<5>| {
+            let mut policy = StreamingPolicy::new(model.clone(), &device).unwrap();
+            let n = episode.dims()[1];
+            (0..n)
+                .map(|t| {
+                    let img = episode.clone().narrow(1, t, 1).squeeze_dim::<4>(1);
+                    policy
+                        .act_tensor(img, instr.clone().narrow(0, 0, 1), None)
+                        .unwrap()
+                })
+                .collect::<Vec<_>>()
+        };
+        let want = [
+            streamed(e0),
+            streamed(e1a).into_iter().chain(streamed(e1b)).collect(),
+        ];
+        let mut worst = 0.0f32;
+        for lane in 0..2 {
+            let got = Tensor::cat(chunked[lane].clone(), 1); // [1, 8, H_a, A]
+            for (t, chunk) in want[lane].iter().enumerate() {
+                let g = got.clone().narrow(1, t, 1).reshape(chunk.dims());
+                worst = worst.max((g - chunk.clone()).abs().max().into_scalar::<f32>());
+            }
+        }
+        assert!(worst < 1e-4, "{}: max diff {worst}", cfg.variant.name());
+    }
+
+    #[test]
+    fn chunked_training_with_carried_memory_equals_streaming_e_slotssm() {
+        chunks_equal_streaming(micro("e_slotssm"));
+    }
+
+    #[test]
+    fn chunked_training_with_carried_memory_equals_streaming_slotvla_h3() {
+        chunks_equal_streaming(micro("slotvla_h3"));
+    }
+
+    #[test]
+    fn chunked_training_with_carried_memory_equals_streaming_dense_h3() {
+        chunks_equal_streaming(micro("dense_h3"));
+    }
+
     #[test]
     fn records_round_trip_and_bad_files_are_errors() {
         let (_guard, device) = test_device();

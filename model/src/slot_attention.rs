@@ -40,6 +40,8 @@ pub struct SlotAttention {
     pub iters_first: usize,
     /// Iterations on later frames.
     pub iters_later: usize,
+    /// Layer-normalise carried slots (see `SlotConfig::normalize_carried`).
+    pub normalize_carried: bool,
 }
 
 impl SlotAttention {
@@ -64,6 +66,7 @@ impl SlotAttention {
             )),
             iters_first: config.slots.iters_first,
             iters_later: config.slots.iters_later,
+            normalize_carried: config.slots.normalize_carried,
         }
     }
 
@@ -103,7 +106,8 @@ impl SlotAttention {
     /// Slot attention on one frame.
     ///
     /// `prev` = None starts from the learned Q₀ with `iters_first` iterations; otherwise from
-    /// `sg(prev)` with `iters_later` iterations.
+    /// `sg(prev)` (layer-normalised, without affine, when `normalize_carried`) with
+    /// `iters_later` iterations.
     ///
     /// # Shapes
     /// - features: `[B, M, D_f]`
@@ -122,7 +126,16 @@ impl SlotAttention {
             ),
             Some(p) => {
                 assert_shape!(p, [b, kk, d]);
-                (p.detach(), self.iters_later)
+                let p = p.detach();
+                let p = if self.normalize_carried {
+                    let mean = p.clone().mean_dim(2);
+                    let centred = p - mean;
+                    let var = centred.clone().powi_scalar(2).mean_dim(2);
+                    centred / var.add_scalar(1e-5).sqrt()
+                } else {
+                    p
+                };
+                (p, self.iters_later)
             }
         };
         let mut masks = Tensor::zeros([b, kk, m], &k.device());

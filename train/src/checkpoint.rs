@@ -12,7 +12,7 @@ use model::run;
 use model::{ModelConfig, PolicyModel};
 use serde::{Deserialize, Serialize};
 
-use crate::dataset::Sampler;
+use crate::dataset::{EpisodeSampler, Sampler};
 use crate::error::{Result, TrainError};
 
 pub use model::run::{
@@ -23,6 +23,8 @@ pub use model::run::{
 pub const STATE_FORMAT: &str = "libero-mem-rs/train-state/1";
 /// The optimiser moments of a checkpoint.
 pub const OPTIM: &str = "optim.bpk";
+/// The memory carried into the next batch (episode sampling).
+pub const CARRY: &str = "carry.json";
 
 /// Everything besides weights and optimiser moments that a resumed run needs.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -31,8 +33,11 @@ pub struct TrainState {
     pub format: String,
     /// Optimiser steps done (the scheduler's state: the learning rate is a function of it).
     pub step: u64,
-    /// Data sampler position.
+    /// Data sampler position (`sampling = "windows"`).
     pub sampler: Sampler,
+    /// Episode lanes (`sampling = "episodes"`); the carried memory is in `carry.json`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub episodes: Option<EpisodeSampler>,
     /// Seed of Burn's RNG; the trainer re-seeds it with `rng_seed ^ step` right after writing
     /// a checkpoint and when resuming from one, so both runs see the same random stream.
     pub rng_seed: u64,
@@ -49,6 +54,7 @@ pub fn save(
     model: &PolicyModel,
     optim: &ModuleOptimizer,
     state: &TrainState,
+    carry: &model::Carry,
     config_toml: &str,
 ) -> Result<PathBuf> {
     Ok(run::save_checkpoint(
@@ -57,6 +63,10 @@ pub fn save(
         model,
         state,
         |t| {
+            if !carry.is_empty() {
+                let json = serde_json::to_string(&carry.to_record()).expect("carry serialises");
+                run::write_synced(&t.join(CARRY), json.as_bytes())?;
+            }
             optim
                 .save(t.join(OPTIM))
                 .map_err(|e| model::ModelError::run(t.join(OPTIM), e.to_string()))?;
@@ -82,6 +92,22 @@ pub fn read_state(dir: &Path) -> Result<TrainState> {
         });
     }
     Ok(state)
+}
+
+/// The carried memory saved with a checkpoint (empty when it has none).
+pub fn read_carry(dir: &Path, device: &Device) -> Result<model::Carry> {
+    let p = dir.join(CARRY);
+    if !p.is_file() {
+        return Ok(model::Carry::default());
+    }
+    let incompatible = |message: String| TrainError::IncompatibleCheckpoint {
+        path: dir.to_path_buf(),
+        message,
+    };
+    let text = std::fs::read_to_string(&p).map_err(|e| TrainError::io(&p, e))?;
+    let rec: model::variants::CarryRecord =
+        serde_json::from_str(&text).map_err(|e| incompatible(format!("{CARRY}: {e}")))?;
+    model::Carry::from_record(&rec, device).map_err(|e| incompatible(format!("{CARRY}: {e}")))
 }
 
 /// A loaded checkpoint.

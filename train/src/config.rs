@@ -168,8 +168,13 @@ pub struct LossWeights {
 pub struct TrainSection {
     /// Optimiser steps.
     pub steps: u64,
-    /// Windows per batch.
+    /// Windows (or episode lanes) per batch.
     pub batch_size: usize,
+    /// How batches are drawn: `episodes` walks whole episodes in consecutive chunks of the
+    /// window length, carrying the memory (slots, SSM state, history) from chunk to chunk
+    /// (truncated BPTT, model.md §10); `windows` draws independent windows, each from a cold
+    /// memory (for comparison).
+    pub sampling: Sampling,
     /// Peak learning rate (AdamW).
     pub lr: f64,
     /// Linear warm-up steps (from 0 to `lr`).
@@ -203,11 +208,23 @@ pub struct TrainSection {
 
 pub use crate::stages::Stage;
 
+/// `[train].sampling`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Sampling {
+    /// Consecutive chunks of whole episodes with carried memory.
+    #[default]
+    Episodes,
+    /// Independent windows from every step, each from a cold memory.
+    Windows,
+}
+
 impl Default for TrainSection {
     fn default() -> Self {
         TrainSection {
             steps: 20_000,
             batch_size: 8,
+            sampling: Sampling::default(),
             lr: 3e-4,
             warmup_steps: 500,
             final_lr_fraction: 0.0,
@@ -451,8 +468,7 @@ variant = "e_slotssm"
         assert_eq!(Config::parse(&c.to_toml()).unwrap(), c);
         let e = Config::parse(&text.replace("freeze", "frezee")).unwrap_err();
         assert!(e.contains("frezee"), "{e}");
-        let e = Config::parse(&text.replace("\"decoder\"", "\"decodr\"")).unwrap_err();
-        assert!(e.contains("train.stages[0]") && e.contains("decodr"), "{e}");
+        // A part the model lacks is checked against the built model (stages::check_freeze).
     }
 
     #[test]

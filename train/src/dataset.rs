@@ -193,6 +193,23 @@ impl RunData {
             .collect::<data::Result<Vec<_>>>()?;
         Ok(self.processor.batch(&samples, device)?)
     }
+
+    /// The training chunks `spans` as a model batch on `device`, with the lanes that start an
+    /// episode (`[B]`, true = fresh).
+    pub fn chunk_batch(
+        &self,
+        spans: &[ChunkSpan],
+        device: &Device,
+    ) -> Result<(model::WindowBatch, Tensor<1, Bool>)> {
+        use rayon::prelude::*;
+        let samples = spans
+            .par_iter()
+            .map(|s| self.train.chunk(s.episode, s.start, s.epoch))
+            .collect::<data::Result<Vec<_>>>()?;
+        let fresh: Vec<bool> = spans.iter().map(|s| s.fresh).collect();
+        let fresh = Tensor::from_data(TensorData::new(fresh, [spans.len()]), device);
+        Ok((self.processor.batch(&samples, device)?, fresh))
+    }
 }
 
 /// Seeded sampling order: sample positions form one endless stream of epochs, each a fresh
@@ -250,6 +267,91 @@ impl Sampler {
     }
 }
 
+/// One lane of the episode sampler: the episode it walks and where its next chunk starts.
+#[derive(Clone, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+pub struct Lane {
+    /// Position of the episode in the training split.
+    pub episode: usize,
+    /// Epoch of the episode draw (seeds its augmentation).
+    pub epoch: u64,
+    /// First step of the lane's next chunk.
+    pub start: usize,
+}
+
+/// One chunk of a batch: which episode, from which step, and whether the lane starts the
+/// episode there (its carried memory is then not used).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct ChunkSpan {
+    /// Position of the episode in the training split.
+    pub episode: usize,
+    /// First step.
+    pub start: usize,
+    /// Epoch of the episode draw.
+    pub epoch: u64,
+    /// The chunk starts the episode.
+    pub fresh: bool,
+}
+
+/// Episode-long training (truncated BPTT, model.md §10): B lanes each walk one episode in
+/// consecutive chunks from its first frame, and take the next episode of a seeded per-epoch
+/// order when theirs ends. The state (episode order position, lanes) is part of the checkpoint,
+/// so a resumed run draws exactly the chunks the uninterrupted run would have drawn.
+#[derive(Clone, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+pub struct EpisodeSampler {
+    /// Draws episodes in the order of a [`Sampler`] over the split's episodes.
+    pub order: Sampler,
+    /// The lanes (empty before the first batch).
+    pub lanes: Vec<Lane>,
+}
+
+impl EpisodeSampler {
+    /// A sampler over `episodes` episodes.
+    pub fn new(seed: u64, episodes: usize) -> Self {
+        EpisodeSampler {
+            order: Sampler::new(seed, episodes),
+            lanes: Vec::new(),
+        }
+    }
+
+    /// The next batch: `lanes` chunks of `len` steps; `episode_len(k)` gives episode k's length.
+    pub fn next_batch(
+        &mut self,
+        lanes: usize,
+        len: usize,
+        episode_len: impl Fn(usize) -> usize,
+    ) -> Vec<ChunkSpan> {
+        while self.lanes.len() < lanes {
+            let (episode, epoch) = self.order.next_batch(1)[0];
+            self.lanes.push(Lane {
+                episode,
+                epoch,
+                start: 0,
+            });
+        }
+        self.lanes
+            .iter_mut()
+            .map(|lane| {
+                if lane.start >= episode_len(lane.episode) {
+                    let (episode, epoch) = self.order.next_batch(1)[0];
+                    *lane = Lane {
+                        episode,
+                        epoch,
+                        start: 0,
+                    };
+                }
+                let span = ChunkSpan {
+                    episode: lane.episode,
+                    start: lane.start,
+                    epoch: lane.epoch,
+                    fresh: lane.start == 0,
+                };
+                lane.start += len;
+                span
+            })
+            .collect()
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -268,5 +370,47 @@ mod tests {
         let mut b: Sampler = serde_json::from_str(&json).unwrap();
         assert_eq!(a.next_batch(9), b.next_batch(9));
         assert_ne!(Sampler::new(8, 10).next_batch(10), first);
+    }
+
+    #[test]
+    fn episode_lanes_walk_whole_episodes_in_chunks_and_resume_exactly() {
+        let lens = [5usize, 3, 7];
+        let mut s = EpisodeSampler::new(1, 3);
+        let mut walked: std::collections::BTreeMap<(usize, u64), Vec<usize>> = Default::default();
+        for _ in 0..12 {
+            let b = s.next_batch(2, 2, |k| lens[k]);
+            assert_eq!(b.len(), 2);
+            for c in &b {
+                assert!(c.start < lens[c.episode]);
+                assert_eq!(c.fresh, c.start == 0);
+                walked
+                    .entry((c.episode, c.epoch))
+                    .or_default()
+                    .push(c.start);
+            }
+        }
+        // Each episode pass is walked from step 0 in consecutive chunks of 2 steps.
+        assert!(walked.len() >= 4);
+        for ((k, _), starts) in &walked {
+            assert_eq!(
+                *starts,
+                (0..starts.len()).map(|i| 2 * i).collect::<Vec<_>>(),
+                "{k}"
+            );
+            assert!(starts.len() <= lens[*k].div_ceil(2));
+        }
+        // Resumed from its serialised state, the sampler continues identically.
+        let mut a = EpisodeSampler::new(1, 3);
+        for _ in 0..5 {
+            a.next_batch(2, 2, |k| lens[k]);
+        }
+        let mut b: EpisodeSampler =
+            serde_json::from_str(&serde_json::to_string(&a).unwrap()).unwrap();
+        for _ in 0..7 {
+            assert_eq!(
+                a.next_batch(2, 2, |k| lens[k]),
+                b.next_batch(2, 2, |k| lens[k])
+            );
+        }
     }
 }

@@ -18,13 +18,13 @@ use std::time::Instant;
 use burn::optim::{AdamWConfig, GradientsParams, ModuleOptimizer};
 use burn::prelude::*;
 use indicatif::{ProgressBar, ProgressStyle};
-use model::{Losses, ModelConfig, PolicyModel};
+use model::{Carry, Losses, ModelConfig, PolicyModel};
 use serde::{Deserialize, Serialize};
 
 use crate::checkpoint::{self, STATE_FORMAT, TrainState};
 use crate::clip::clip_global_norm;
-use crate::config::{BackendKind, Config};
-use crate::dataset::{RunData, Sampler, ensure_dataset};
+use crate::config::{BackendKind, Config, Sampling};
+use crate::dataset::{EpisodeSampler, RunData, Sampler, ensure_dataset};
 use crate::error::{Result, TrainError};
 use crate::metrics::{self, JsonlWriter, Record};
 use crate::plot;
@@ -281,9 +281,33 @@ pub fn train(cfg: &Config, opts: &TrainOptions) -> Result<TrainSummary> {
     {
         return Err(e);
     }
-    let (mut model, mut optim, mut state, resumed_from) = match loaded {
+    let episodes = data.train.num_episodes();
+    let (mut model, mut optim, mut state, mut carry, resumed_from) = match loaded {
         Some(l) => {
             ad.seed(l.state.rng_seed ^ l.state.step);
+            let lanes = l.state.episodes.as_ref().map_or(episodes, |e| e.order.len);
+            if lanes != episodes {
+                return Err(TrainError::IncompatibleCheckpoint {
+                    path: l.dir,
+                    message: format!(
+                        "its episode sampler covers {lanes} training episodes, the dataset now has {episodes}"
+                    ),
+                });
+            }
+            if l.state.episodes.is_some() != (t.sampling == Sampling::Episodes) {
+                return Err(TrainError::IncompatibleCheckpoint {
+                    path: l.dir,
+                    message: format!(
+                        "it was trained with another `[train].sampling` than `{}`",
+                        if t.sampling == Sampling::Episodes {
+                            "episodes"
+                        } else {
+                            "windows"
+                        }
+                    ),
+                });
+            }
+            let carry = checkpoint::read_carry(&l.dir, &ad)?;
             if l.state.sampler.len != data.train.len() {
                 return Err(TrainError::IncompatibleCheckpoint {
                     path: l.dir,
@@ -294,7 +318,7 @@ pub fn train(cfg: &Config, opts: &TrainOptions) -> Result<TrainSummary> {
                     ),
                 });
             }
-            (l.model, l.optim, l.state, Some(l.dir))
+            (l.model, l.optim, l.state, carry, Some(l.dir))
         }
         None => {
             ad.seed(t.seed);
@@ -303,14 +327,17 @@ pub fn train(cfg: &Config, opts: &TrainOptions) -> Result<TrainSummary> {
                 format: STATE_FORMAT.into(),
                 step: 0,
                 sampler: Sampler::new(t.seed, data.train.len()),
+                episodes: (t.sampling == Sampling::Episodes)
+                    .then(|| EpisodeSampler::new(t.seed, episodes)),
                 rng_seed: t.seed,
                 elapsed_s: 0.0,
                 model: mcfg.clone(),
             };
-            (model, new_optimizer(&cfg), state, None)
+            (model, new_optimizer(&cfg), state, Carry::default(), None)
         }
     };
     let start_step = state.step;
+    let window = cfg.window_len();
     stages::check_freeze(&t.stages, &model).map_err(|m| config_error(&cfg, m))?;
 
     // The policy's files (model::run, what eval reads) and, LeRobot-style, the resolved config.
@@ -351,10 +378,27 @@ pub fn train(cfg: &Config, opts: &TrainOptions) -> Result<TrainSummary> {
     let val_due = |step: u64| t.val_every > 0 && step.is_multiple_of(t.val_every);
     while state.step < end {
         let data_started = Instant::now();
-        let indices = state.sampler.next_batch(t.batch_size);
-        let batch = data.batch(&data.train, &indices, &ad)?;
+        let (batch, fresh) = match state.episodes.as_mut() {
+            // Consecutive chunks of whole episodes: the memory of the previous chunk goes on.
+            Some(lanes) => {
+                let spans = lanes.next_batch(t.batch_size, window, |k| data.train.episode_len(k));
+                let (batch, fresh) = data.chunk_batch(&spans, &ad)?;
+                (batch, Some(fresh))
+            }
+            None => {
+                let indices = state.sampler.next_batch(t.batch_size);
+                (data.batch(&data.train, &indices, &ad)?, None)
+            }
+        };
+        let carry_in = match fresh {
+            Some(fresh) if !carry.is_empty() => carry.clone().with_fresh(fresh),
+            _ => Carry::default(),
+        };
         let data_s = data_started.elapsed().as_secs_f64();
-        let (_, losses) = model.forward(&batch)?;
+        let (_, losses, carry_out) = model.forward_from(&batch, carry_in)?;
+        if state.episodes.is_some() {
+            carry = carry_out;
+        }
         let mut rec = record(state.step + 1, &losses);
         rec.data_s = data_s;
         let stage = stages::active(&t.stages, state.step).map(|(_, s)| s);
@@ -422,6 +466,7 @@ pub fn train(cfg: &Config, opts: &TrainOptions) -> Result<TrainSummary> {
                 &model,
                 &optim,
                 &state,
+                &carry,
                 &config_toml,
             )?);
             checkpoint::prune(&run, t.keep)?;

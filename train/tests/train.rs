@@ -145,9 +145,26 @@ fn short_config(steps: u64, every: u64) -> train::Config {
 #[test]
 fn stopped_and_resumed_run_ends_with_identical_weights() {
     let _g = serial();
+    for sampling in [
+        train::config::Sampling::Episodes,
+        train::config::Sampling::Windows,
+    ] {
+        stop_and_resume(sampling);
+    }
+}
+
+/// Episode sampling carries the memory across batches: the checkpoint keeps it (carry.json),
+/// so the resumed run continues with the memory the uninterrupted run had.
+fn stop_and_resume(sampling: train::config::Sampling) {
     let (a, b) = (tempfile::tempdir().unwrap(), tempfile::tempdir().unwrap());
-    let cfg = short_config(12, 6);
+    let mut cfg = short_config(12, 6);
+    cfg.train.sampling = sampling;
     train::train(&cfg, &opts(a.path())).unwrap();
+    let carried = a
+        .path()
+        .join("checkpoints/step_000000006/carry.json")
+        .is_file();
+    assert_eq!(carried, sampling == train::config::Sampling::Episodes);
     // Stopped at the mid-way checkpoint, as if killed right after it.
     let stop = TrainOptions {
         stop_at: Some(6),
@@ -172,7 +189,7 @@ fn stopped_and_resumed_run_ends_with_identical_weights() {
     assert_eq!(
         bits(&final_weights(a.path())),
         bits(&final_weights(b.path())),
-        "resumed run differs from the uninterrupted one"
+        "{sampling:?}: resumed run differs from the uninterrupted one"
     );
     let steps: Vec<u64> = metrics::read(&b.path().join("metrics.jsonl"))
         .unwrap()

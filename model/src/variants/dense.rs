@@ -4,8 +4,10 @@
 use burn::nn::{Linear, LinearConfig};
 use burn::prelude::*;
 
-use super::{Carry, History, Memory, Shared, TYPE_PATCH, WindowParts, WindowTokens};
+use super::history::History;
+use super::types::{Carry, Memory, Shared, TYPE_PATCH, WindowParts, WindowTokens};
 use crate::config::ModelConfig;
+use crate::error::Result;
 
 /// The dense variant's token builder.
 #[derive(Module, Debug)]
@@ -32,22 +34,26 @@ impl DenseTokens {
 
     /// # Shapes
     /// - feats: `[B, T, M, D_f]`; output: see [`WindowTokens`]
-    pub fn window(&self, feats: Tensor<4>, shared: Shared) -> WindowTokens {
+    pub fn window(&self, feats: Tensor<4>, carry: Carry, shared: Shared) -> Result<WindowTokens> {
         let [b, t, m, d_f] = feats.dims();
         let tokens = self.tokens(feats.reshape([b * t, m, d_f]), shared);
-        let (tokens, pad) = match &self.history {
+        let (tokens, pad, history, history_valid) = match &self.history {
             Some(h) => {
-                let (x, pad) = h.window(tokens, b, t);
-                (x, Some(pad))
+                let (x, pad, last, valid) = h.window(tokens, b, t, &carry);
+                (x, Some(pad), Some(last), Some(valid))
             }
-            None => (tokens, None),
+            None => (tokens, None, None, None),
         };
-        WindowTokens {
+        Ok(WindowTokens {
             tokens,
             pad,
             parts: WindowParts::default(),
-            carry: Carry::default(),
-        }
+            carry: Carry {
+                history,
+                history_valid,
+                ..Carry::default()
+            },
+        })
     }
 
     /// # Shapes

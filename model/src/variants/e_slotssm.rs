@@ -6,7 +6,8 @@ use burn::module::Param;
 use burn::prelude::*;
 use burn::tensor::Distribution;
 
-use super::{Carry, Memory, Shared, SlotCore, WindowParts, WindowTokens};
+use super::slots::SlotCore;
+use super::types::{Carry, Memory, Shared, WindowParts, WindowTokens};
 use crate::config::ModelConfig;
 use crate::error::{ModelError, Result};
 use crate::heads::{SlotFusion, WindowHead};
@@ -119,10 +120,17 @@ impl SlotSsmTokens {
         if let Some(state) = &carry.ssm {
             self.check_state(state, b, &device)?;
         }
-        let (slots, masks, last) = self.core.window(feats.clone(), carry.slots)?;
+        let (slots, masks, last) =
+            self.core
+                .window(feats.clone(), carry.slots.clone(), carry.fresh.clone())?;
         let [_, _, k, d] = slots.dims();
         let ssm_feats = self.cross_attention.then(|| feats.clone());
-        let (pred, state) = self.slot_ssm.forward(slots.clone(), ssm_feats, carry.ssm);
+        // Fresh lanes start from the zero state, as at an episode start.
+        let state = match (carry.ssm, &carry.fresh) {
+            (Some(s), Some(fresh)) => Some(zero_lanes(s, fresh, k)),
+            (s, _) => s,
+        };
+        let (pred, state) = self.slot_ssm.forward(slots.clone(), ssm_feats, state);
         let window = self.window_head.forward(pred.clone(), slots.clone());
         let sub = subgoal.map(|s| {
             let [_, _, g, l] = s.dims();
@@ -147,6 +155,7 @@ impl SlotSsmTokens {
             carry: Carry {
                 slots: Some(last),
                 ssm: Some(state.detach()),
+                ..Carry::default()
             },
         })
     }
@@ -178,5 +187,34 @@ impl SlotSsmTokens {
         let g = self.subgoal_embedding(subgoal, 1, shared, &device)?;
         let z = self.fusion.forward(slots, pred, g);
         Ok(self.core.tokens(feats, z, shared))
+    }
+}
+
+/// The state with the rows of the `fresh` lanes (each K sequences) set to zero.
+///
+/// # Shapes
+/// - state: per block over B·K sequences; fresh: `[B]`
+fn zero_lanes(state: SlotSsmState, fresh: &Tensor<1, Bool>, k: usize) -> SlotSsmState {
+    let [b] = fresh.dims();
+    let rows = fresh
+        .clone()
+        .reshape([b, 1])
+        .repeat_dim(1, k)
+        .reshape([b * k, 1, 1]);
+    SlotSsmState {
+        blocks: state
+            .blocks
+            .into_iter()
+            .map(|mut s| {
+                let [_, e, n] = s.h.dims();
+                s.h =
+                    s.h.mask_fill(rows.clone().repeat_dim(1, e).repeat_dim(2, n), 0.0);
+                let [_, e, c] = s.conv.dims();
+                s.conv = s
+                    .conv
+                    .mask_fill(rows.clone().repeat_dim(1, e).repeat_dim(2, c), 0.0);
+                s
+            })
+            .collect(),
     }
 }

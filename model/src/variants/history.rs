@@ -4,6 +4,8 @@
 use std::collections::VecDeque;
 
 use burn::module::Param;
+
+use super::types::Carry;
 use burn::prelude::*;
 use burn::tensor::Distribution;
 
@@ -55,46 +57,71 @@ impl History {
         Tensor::cat(frames, 1)
     }
 
-    /// History tokens for every frame of a window: frame t sees frames t−h+1 … t; frames before
-    /// the window start repeat frame 0 and are masked.
+    /// History tokens for every frame of a window: frame t sees frames t−h+1 … t. Frames before
+    /// the window come from the carried history where a lane continues an episode; before an
+    /// episode's start (no carry, or a `fresh` lane) they repeat frame 0 and are masked.
     ///
     /// # Shapes
-    /// - tokens: `[B·T, V₁, D_dec]`
-    /// - output: (`[B·T, h·V₁, D_dec]`, pad `[B·T, h·V₁]`)
-    pub fn window(&self, tokens: Tensor<3>, b: usize, t: usize) -> (Tensor<3>, Tensor<2, Bool>) {
+    /// - tokens: `[B·T, V₁, D_dec]`; carry history `[B, h−1, V₁, D_dec]`, valid `[B, h−1]`,
+    ///   fresh `[B]`
+    /// - output: (`[B·T, h·V₁, D_dec]`, pad `[B·T, h·V₁]`, the history after the window and its
+    ///   validity, detached)
+    pub fn window(
+        &self,
+        tokens: Tensor<3>,
+        b: usize,
+        t: usize,
+        carry: &Carry,
+    ) -> (Tensor<3>, Tensor<2, Bool>, Tensor<4>, Tensor<2, Bool>) {
         let h = self.len();
         let [_, v, w] = tokens.dims();
         let device = tokens.device();
         let x = tokens.reshape([b, t, v, w]);
-        let first = x.clone().narrow(1, 0, 1);
+        // Before the window: frame 0 repeated, invalid ...
+        let mut before = x.clone().narrow(1, 0, 1).repeat_dim(1, h - 1);
+        let mut before_valid = Tensor::<2, Bool>::from_data(
+            TensorData::new(vec![false; b * (h - 1)], [b, h - 1]),
+            &device,
+        );
+        // ... unless the lane continues from carried frames.
+        if let (Some(prev), Some(valid)) = (&carry.history, &carry.history_valid) {
+            let keep = match &carry.fresh {
+                Some(f) => f.clone().bool_not(),
+                None => Tensor::<1, Bool>::from_data(TensorData::new(vec![true; b], [b]), &device),
+            };
+            let keep2 = keep.clone().reshape([b, 1]).repeat_dim(1, h - 1);
+            let keep4 = keep2
+                .clone()
+                .reshape([b, h - 1, 1, 1])
+                .repeat_dim(2, v)
+                .repeat_dim(3, w);
+            before = before.mask_where(keep4, prev.clone());
+            before_valid = before_valid.mask_where(keep2, valid.clone());
+        }
+        let ext = Tensor::cat(vec![before, x], 1); // [B, h−1+T, V₁, D_dec]
+        let ext_valid = Tensor::cat(
+            vec![
+                before_valid,
+                Tensor::<2, Bool>::from_data(TensorData::new(vec![true; b * t], [b, t]), &device),
+            ],
+            1,
+        ); // [B, h−1+T]
         let mut frames = Vec::with_capacity(h);
         let mut pads = Vec::with_capacity(h);
         for o in 0..h {
-            let lag = h - 1 - o;
-            let shifted = if lag == 0 {
-                x.clone()
-            } else if lag >= t {
-                first.clone().repeat_dim(1, t)
-            } else {
-                Tensor::cat(
-                    vec![
-                        first.clone().repeat_dim(1, lag),
-                        x.clone().narrow(1, 0, t - lag),
-                    ],
-                    1,
-                )
-            };
-            frames.push(shifted.reshape([b * t, v, w]));
-            let pad: Vec<f32> = (0..t).map(|ti| if ti < lag { 1.0 } else { 0.0 }).collect();
+            frames.push(ext.clone().narrow(1, o, t).reshape([b * t, v, w]));
             pads.push(
-                Tensor::<1>::from_data(TensorData::new(pad, [t]), &device)
-                    .reshape([1, t, 1])
-                    .repeat_dim(0, b)
-                    .repeat_dim(2, v)
-                    .reshape([b * t, v]),
+                ext_valid
+                    .clone()
+                    .narrow(1, o, t)
+                    .bool_not()
+                    .reshape([b * t, 1])
+                    .repeat_dim(1, v),
             );
         }
-        (self.stack(frames), Tensor::cat(pads, 1).equal_elem(1.0))
+        let last = ext.clone().narrow(1, t, h - 1).detach();
+        let last_valid = ext_valid.narrow(1, t, h - 1);
+        (self.stack(frames), Tensor::cat(pads, 1), last, last_valid)
     }
 
     /// Appends this frame's tokens to a streaming history and returns what the decoder sees.

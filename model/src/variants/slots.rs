@@ -5,7 +5,7 @@
 use burn::nn::{Linear, LinearConfig};
 use burn::prelude::*;
 
-use super::{Shared, TYPE_RELATION, TYPE_SLOT};
+use super::types::{Shared, TYPE_RELATION, TYPE_SLOT};
 use crate::config::ModelConfig;
 use crate::error::{ModelError, Result};
 use crate::heads::SlotDecoder;
@@ -44,15 +44,17 @@ impl SlotCore {
         }
     }
 
-    /// Slots of a window that continues from `prev` (the carried last slots).
+    /// Slots of a window that continues from `prev` (the carried last slots); lanes marked
+    /// `fresh` start from the learned initial slots instead, as at an episode start.
     ///
     /// # Shapes
-    /// - feats: `[B, T, M, D_f]`; prev: `[B, K, D]`
+    /// - feats: `[B, T, M, D_f]`; prev: `[B, K, D]`; fresh: `[B]`
     /// - output: (slots `[B, T, K, D]`, masks `[B, T, K, M]`, last slots `[B, K, D]` detached)
     pub fn window(
         &self,
         feats: Tensor<4>,
         prev: Option<Tensor<3>>,
+        fresh: Option<Tensor<1, Bool>>,
     ) -> Result<(Tensor<4>, Tensor<4>, Tensor<3>)> {
         let [b, t, _, _] = feats.dims();
         let (k, d) = (self.slot_attention.num_slots(), self.slot_attention.dim());
@@ -64,7 +66,37 @@ impl SlotCore {
                 p.dims()
             )));
         }
-        let (slots, masks) = self.slot_attention.forward(feats, prev);
+        let (slots, masks) = match (prev, fresh) {
+            (Some(p), Some(fresh)) => {
+                // Frame 0 both ways (fresh: Q₀ with iters_first; carried: iters_later), chosen
+                // per lane; the rest of the window continues from the chosen slots.
+                let [_, _, m, _] = feats.dims();
+                let f0 = feats.clone().narrow(1, 0, 1).squeeze_dim::<3>(1);
+                let (s_new, a_new) = self.slot_attention.step(f0.clone(), None);
+                let (s_old, a_old) = self.slot_attention.step(f0, Some(p));
+                let lane = |w: usize| {
+                    fresh
+                        .clone()
+                        .reshape([b, 1, 1])
+                        .repeat_dim(1, k)
+                        .repeat_dim(2, w)
+                };
+                let s0 = s_old.mask_where(lane(d), s_new);
+                let a0 = a_old.mask_where(lane(m), a_new);
+                if t == 1 {
+                    (s0.unsqueeze_dim(1), a0.unsqueeze_dim(1))
+                } else {
+                    let (s, a) = self
+                        .slot_attention
+                        .forward(feats.narrow(1, 1, t - 1), Some(s0.clone()));
+                    (
+                        Tensor::cat(vec![s0.unsqueeze_dim(1), s], 1),
+                        Tensor::cat(vec![a0.unsqueeze_dim(1), a], 1),
+                    )
+                }
+            }
+            (prev, _) => self.slot_attention.forward(feats, prev),
+        };
         let last = slots
             .clone()
             .narrow(1, t - 1, 1)

@@ -4,7 +4,9 @@
 use burn::nn::{Linear, LinearConfig};
 use burn::prelude::*;
 
-use super::{Carry, History, Memory, Shared, SlotCore, WindowParts, WindowTokens};
+use super::history::History;
+use super::slots::SlotCore;
+use super::types::{Carry, Memory, Shared, WindowParts, WindowTokens};
 use crate::config::ModelConfig;
 use crate::error::Result;
 
@@ -34,16 +36,18 @@ impl SlotVlaTokens {
     /// - feats: `[B, T, M, D_f]`; output: see [`WindowTokens`]
     pub fn window(&self, feats: Tensor<4>, carry: Carry, shared: Shared) -> Result<WindowTokens> {
         let [b, t, m, d_f] = feats.dims();
-        let (slots, masks, last) = self.core.window(feats.clone(), carry.slots)?;
+        let (slots, masks, last) =
+            self.core
+                .window(feats.clone(), carry.slots.clone(), carry.fresh.clone())?;
         let [_, _, k, d] = slots.dims();
         let z = self.slot_proj.forward(slots.clone().reshape([b * t, k, d]));
         let tokens = self.core.tokens(feats.reshape([b * t, m, d_f]), z, shared);
-        let (tokens, pad) = match &self.history {
+        let (tokens, pad, history, history_valid) = match &self.history {
             Some(h) => {
-                let (x, pad) = h.window(tokens, b, t);
-                (x, Some(pad))
+                let (x, pad, last, valid) = h.window(tokens, b, t, &carry);
+                (x, Some(pad), Some(last), Some(valid))
             }
-            None => (tokens, None),
+            None => (tokens, None, None, None),
         };
         Ok(WindowTokens {
             tokens,
@@ -55,7 +59,9 @@ impl SlotVlaTokens {
             },
             carry: Carry {
                 slots: Some(last),
-                ssm: None,
+                history,
+                history_valid,
+                ..Carry::default()
             },
         })
     }

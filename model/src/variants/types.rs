@@ -1,0 +1,237 @@
+//! The data that flows between the shared model and its variants: carried memory (windows and
+//! streaming), a window's tokens and intermediate results, and the shared modules a variant reads.
+
+use std::collections::VecDeque;
+
+use burn::prelude::*;
+
+use crate::error::{ModelError, Result};
+use crate::slot_ssm::SlotSsmState;
+use crate::text::TextEncoder;
+
+/// Visual token types added before the decoder (rows of `PolicyModel::token_type`).
+pub(crate) const TYPE_RELATION: usize = 0;
+pub(crate) const TYPE_SLOT: usize = 1;
+pub(crate) const TYPE_PATCH: usize = 2;
+
+/// Memory carried from one window to the next of the same episodes (truncated BPTT, model.md
+/// §10), detached: the last frame's slots, the SlotSSM state, and for SlotVLA(h)/dense(h) the
+/// tokens of the last h − 1 frames. An empty carry starts every lane at an episode start;
+/// `fresh` marks the lanes that start a new episode at this window although others continue
+/// (their carried memory is ignored: learned initial slots, zero SSM state, no history).
+#[derive(Clone, Debug, Default)]
+pub struct Carry {
+    /// Slots of the last frame `[B, K, D]` (slot variants).
+    pub slots: Option<Tensor<3>>,
+    /// SlotSSM state after the last frame (e_slotssm).
+    pub ssm: Option<SlotSsmState>,
+    /// Decoder tokens of the last h − 1 frames `[B, h−1, V₁, D_dec]` (history variants).
+    pub history: Option<Tensor<4>>,
+    /// `[B, h−1]`: which of those frames belong to the episode (false = before its start).
+    pub history_valid: Option<Tensor<2, Bool>>,
+    /// `[B]`: lanes that start a new episode at this window (None: none do).
+    pub fresh: Option<Tensor<1, Bool>>,
+}
+
+impl Carry {
+    /// The same memory with `fresh` lanes marked as starting a new episode.
+    pub fn with_fresh(self, fresh: Tensor<1, Bool>) -> Self {
+        Carry {
+            fresh: Some(fresh),
+            ..self
+        }
+    }
+}
+
+/// The state a streaming policy carries from step to step (reset per episode).
+#[derive(Clone, Debug, Default)]
+pub struct Memory {
+    /// Slots of the previous frame `[1, K, D]` (slot variants).
+    pub slots: Option<Tensor<3>>,
+    /// SlotSSM state (e_slotssm).
+    pub ssm: Option<SlotSsmState>,
+    /// Decoder tokens of the last h frames, oldest first, each `[1, V₁, D_dec]` (h > 1 only).
+    pub history: VecDeque<Tensor<3>>,
+    /// Slot-attention masks of the latest frame `[1, K, M]` (slot variants).
+    pub masks: Option<Tensor<3>>,
+}
+
+impl Memory {
+    /// Floats held (slots + SSM states + history tokens).
+    pub fn num_floats(&self) -> usize {
+        self.slots.as_ref().map_or(0, |t| t.shape().num_elements())
+            + self.ssm.as_ref().map_or(0, SlotSsmState::num_floats)
+            + self
+                .history
+                .iter()
+                .map(|t| t.shape().num_elements())
+                .sum::<usize>()
+    }
+}
+
+/// What a variant computes over a window besides the decoder tokens.
+#[derive(Clone, Debug, Default)]
+pub struct WindowParts {
+    /// Slots s `[B, T, K, D]` (slot variants).
+    pub slots: Option<Tensor<4>>,
+    /// Slot attention masks `[B, T, K, M]` (slot variants).
+    pub masks: Option<Tensor<4>>,
+    /// SlotSSM predictions ŝ_{t+1} `[B, T, K, D]` (e_slotssm).
+    pub predicted: Option<Tensor<4>>,
+    /// Windowed predictions Ŝ `[B, T, K, P, D]` (e_slotssm).
+    pub window: Option<Tensor<5>>,
+}
+
+/// The decoder's visual input of a window.
+#[derive(Clone, Debug)]
+pub struct WindowTokens {
+    /// Visual tokens per frame `[B·T, V, D_dec]` (V = h·V₁ with a history).
+    pub tokens: Tensor<3>,
+    /// Padding of the history `[B·T, V]` (true = frame before the window start).
+    pub pad: Option<Tensor<2, Bool>>,
+    /// The variant's intermediate results (for the losses and inspection).
+    pub parts: WindowParts,
+    /// The memory after the window, detached.
+    pub carry: Carry,
+}
+
+/// Shared modules a variant reads but does not own.
+#[derive(Clone, Copy, Debug)]
+pub struct Shared<'a> {
+    /// Visual token type embeddings `[3, D_dec]`.
+    pub token_type: &'a Tensor<2>,
+    /// Word embeddings (for subgoal texts).
+    pub text: &'a TextEncoder,
+}
+
+impl Shared<'_> {
+    /// Embedding of one visual token type.
+    ///
+    /// # Shapes
+    /// - output: `[1, 1, D_dec]`
+    pub(crate) fn type_embedding(&self, kind: usize) -> Tensor<3> {
+        self.token_type.clone().narrow(0, kind, 1).unsqueeze_dim(0)
+    }
+}
+
+/// A tensor in a serialisable form (carried memory in checkpoints).
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct TensorRecord<T> {
+    /// Shape.
+    pub shape: Vec<usize>,
+    /// Values, row-major.
+    pub data: Vec<T>,
+}
+
+fn float_record<const D: usize>(t: &Tensor<D>) -> TensorRecord<f32> {
+    TensorRecord {
+        shape: t.dims().to_vec(),
+        data: t.clone().try_to_vec_as::<f32>().expect("readable tensor"),
+    }
+}
+
+fn float_tensor<const D: usize>(r: &TensorRecord<f32>, device: &Device) -> Result<Tensor<D>> {
+    let shape: [usize; D] = r.shape.as_slice().try_into().map_err(|_| {
+        ModelError::Input(format!(
+            "carried tensor of rank {}, expected {D}",
+            r.shape.len()
+        ))
+    })?;
+    if shape.iter().product::<usize>() != r.data.len() {
+        return Err(ModelError::Input(format!(
+            "carried tensor {:?} with {} values",
+            r.shape,
+            r.data.len()
+        )));
+    }
+    Ok(Tensor::from_data(
+        TensorData::new(r.data.clone(), shape),
+        device,
+    ))
+}
+
+/// [`Carry`] as saved with a checkpoint (so that a resumed run continues with the memory the
+/// uninterrupted run had).
+#[derive(Clone, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct CarryRecord {
+    /// Slots `[B, K, D]`.
+    pub slots: Option<TensorRecord<f32>>,
+    /// Per SlotSSM block: `h [B·K, E, S]` and `conv [B·K, E, d_conv − 1]`.
+    pub ssm: Option<Vec<(TensorRecord<f32>, TensorRecord<f32>)>>,
+    /// History tokens `[B, h−1, V₁, D_dec]`.
+    pub history: Option<TensorRecord<f32>>,
+    /// History validity `[B, h−1]`.
+    pub history_valid: Option<TensorRecord<bool>>,
+}
+
+impl Carry {
+    /// Whether nothing is carried (every lane starts fresh).
+    pub fn is_empty(&self) -> bool {
+        self.slots.is_none() && self.ssm.is_none() && self.history.is_none()
+    }
+
+    /// The serialisable form (`fresh` is not kept: it belongs to the next batch).
+    pub fn to_record(&self) -> CarryRecord {
+        CarryRecord {
+            slots: self.slots.as_ref().map(float_record),
+            ssm: self.ssm.as_ref().map(|s| {
+                s.blocks
+                    .iter()
+                    .map(|b| (float_record(&b.h), float_record(&b.conv)))
+                    .collect()
+            }),
+            history: self.history.as_ref().map(float_record),
+            history_valid: self.history_valid.as_ref().map(|v| TensorRecord {
+                shape: v.dims().to_vec(),
+                data: v.clone().try_to_vec_as::<bool>().expect("readable tensor"),
+            }),
+        }
+    }
+
+    /// Rebuilds a carry on `device` (shapes are checked by the next forward).
+    pub fn from_record(r: &CarryRecord, device: &Device) -> Result<Self> {
+        Ok(Carry {
+            slots: r
+                .slots
+                .as_ref()
+                .map(|t| float_tensor(t, device))
+                .transpose()?,
+            ssm: r
+                .ssm
+                .as_ref()
+                .map(|blocks| -> Result<SlotSsmState> {
+                    Ok(SlotSsmState {
+                        blocks: blocks
+                            .iter()
+                            .map(|(h, c)| {
+                                Ok(crate::mamba::MambaState {
+                                    h: float_tensor(h, device)?,
+                                    conv: float_tensor(c, device)?,
+                                })
+                            })
+                            .collect::<Result<_>>()?,
+                    })
+                })
+                .transpose()?,
+            history: r
+                .history
+                .as_ref()
+                .map(|t| float_tensor(t, device))
+                .transpose()?,
+            history_valid: r
+                .history_valid
+                .as_ref()
+                .map(|v| -> Result<Tensor<2, Bool>> {
+                    let shape: [usize; 2] = v.shape.as_slice().try_into().map_err(|_| {
+                        ModelError::Input("carried history validity is not 2-D".into())
+                    })?;
+                    Ok(Tensor::from_data(
+                        TensorData::new(v.data.clone(), shape),
+                        device,
+                    ))
+                })
+                .transpose()?,
+            fresh: None,
+        })
+    }
+}
