@@ -11,7 +11,7 @@
 use std::ffi::{CStr, c_char, c_void};
 use std::marker::PhantomData;
 
-use crate::mujoco::{Data, MjError, Model, ObjType, ffi, guard};
+use crate::engine::mujoco::{Data, MjError, Model, ObjType, ffi, guard};
 
 /// Errors from the renderer.
 #[derive(Debug, thiserror::Error)]
@@ -430,7 +430,7 @@ impl Renderer {
                 reason: "sides must be between 1 and 8192 pixels".into(),
             });
         }
-        crate::mujoco::init()?;
+        crate::engine::mujoco::init()?;
         let _gl_guard = gl_lock();
         let gl = GlContext::new()?;
         // A shallow copy of the model struct (arrays shared, read-only) with our offscreen size and MSAA:

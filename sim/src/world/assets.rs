@@ -796,7 +796,7 @@ pub const RIGHT_ANGLE: f64 = FRAC_PI_2;
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::mujoco::{Data, Model, ObjType};
+    use crate::engine::mujoco::{Data, Model, ObjType};
     use std::sync::Arc;
 
     fn world_with(def: &AssetDef, z: f64) -> String {
