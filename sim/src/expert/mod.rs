@@ -17,7 +17,7 @@ use nalgebra::{Matrix3, Vector3};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
-use crate::task::{Atom, TaskSpec};
+use crate::task::{Atom, Category, TaskSpec};
 use crate::world::controller::orientation_error;
 use crate::world::env::{Env, EnvConfig, EnvError, Observation};
 use crate::world::scene::Scene;
@@ -260,7 +260,7 @@ impl Expert {
                 if until_pending
                     && e[2] < -0.002
                     && let Target::Carry { held, .. } = target
-                    && scene.instances[held].def.category == "wine_bottle"
+                    && scene.instances[held].def.builtin == Some(Category::WineBottle)
                     && plan::geometry::horizontal_reach(eef) > 0.74
                 {
                     // Setting a bottle down far out: the stretched arm barely answers the small
@@ -389,7 +389,7 @@ impl Expert {
 fn carry_ref(scene: &Scene, env: &Env, held: usize) -> [f64; 3] {
     let b = scene.instances[held].root_body;
     let p = env.data().body_pos(b);
-    if scene.instances[held].def.category != "wine_bottle" {
+    if scene.instances[held].def.builtin != Some(Category::WineBottle) {
         return p;
     }
     let c = [0.0, 0.0, plan::geometry::BOTTLE_NECK];

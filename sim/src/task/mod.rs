@@ -22,8 +22,8 @@ pub mod goal;
 pub mod registry;
 
 pub use bddl::{
-    Atom, BddlError, Goal, Instance, Predicate, Problem, ProblemClass, Region, Span, parse,
-    parse_named, print,
+    Atom, BddlError, Category, Goal, Instance, Predicate, Problem, ProblemClass, Region, Span,
+    parse, parse_named, print,
 };
 pub use goal::{Debounce, GoalError, GoalTracker, Progress};
 pub use registry::{Suite, TaskError, TaskSpec, list, resolve, resolve_with_repeats};

@@ -1,7 +1,11 @@
-//! A minimal LIBERO-style environment: the tabletop arena, the Panda, and one free box.
+//! The LIBERO-style environment: a task's world (its BDDL scene from the builtin assets or LIBERO's
+//! pack, with the goal tracked at every step — [`Env::from_task`], [`Env::from_task_with_assets`]), a
+//! bare scene without a goal ([`Env::with_scene`]), or the minimal tabletop with one free box
+//! ([`Env::new`], for benchmarks and rendering checks), each with the Panda.
 //!
-//! `reset(seed)` places the box from a ChaCha stream seeded by `seed` and puts the arm at LIBERO's nominal
-//! configuration; `step(action)` runs LIBERO's control loop (20 Hz over 25 physics substeps of 2 ms, OSC_POSE
+//! `reset(seed)` samples the initial state (fixtures, objects, articulations; the box) from a ChaCha
+//! stream seeded by `seed`, or [`Env::reset_to_init`] starts from one of LIBERO's stored init states,
+//! and puts the arm at LIBERO's nominal configuration; `step(action)` runs LIBERO's control loop (20 Hz over 25 physics substeps of 2 ms, OSC_POSE
 //! goal on the first substep, gripper ramp on every substep) and returns an [`Observation`]. Same seed and
 //! same actions give bit-identical observations, images included.
 
@@ -13,7 +17,7 @@ use rand_chacha::ChaCha8Rng;
 use crate::engine::mujoco::{Data, MjError, Model, ObjType};
 use crate::engine::render::Decor;
 use crate::engine::render::{Channels, RenderError, RenderQuality, Renderer};
-use crate::task::{Atom, GoalTracker, TaskSpec};
+use crate::task::{Atom, Category, GoalTracker, TaskSpec};
 use crate::world::controller::{GripperRamp, OscPose, quat_to_axis_angle};
 use crate::world::predicates::Predicates;
 use crate::world::robot::{INIT_FINGERS, INIT_QPOS, PandaIds};
@@ -280,7 +284,7 @@ impl Env {
                 .instances
                 .iter()
                 .enumerate()
-                .filter(|(_, i)| i.def.category == "flat_stove")
+                .filter(|(_, i)| i.def.builtin == Some(Category::FlatStove))
                 .filter_map(|(k, i)| {
                     model
                         .id(ObjType::Site, &format!("{}_burner", i.name))

@@ -2,6 +2,8 @@
 //! room for the fingers, the arm's reach from the shoulder, place heights, angle wrapping.
 
 use crate::expert::math::{add, qrot};
+use crate::task::Category;
+use crate::world::assets::AssetDef;
 use crate::world::env::Env;
 use crate::world::scene::Scene;
 
@@ -83,26 +85,13 @@ pub(crate) fn side_clearance(
                 if k == obj {
                     continue;
                 }
-                let tall = matches!(
-                    inst.def.category,
-                    "wine_bottle" | "basket" | "wooden_cabinet" | "wine_rack" | "flat_stove"
-                );
-                if reach > r && !tall {
+                let h = &inst.def.handling;
+                if reach > r && !h.tall {
                     // The hand box passes over low objects; only the fingers reach them.
                     continue;
                 }
-                let rad = match inst.def.category {
-                    "plate" => continue,
-                    "akita_black_bowl" => 0.055,
-                    "wine_bottle" => 0.025,
-                    "cream_cheese" => 0.04,
-                    "basket" => 0.09,
-                    // The carcass's front corners (plus handles) reach 0.17 m from its origin; the
-                    // margin keeps a hand that then carries the bowl past a corner off it.
-                    "wooden_cabinet" => 0.23,
-                    "flat_stove" => 0.1,
-                    "wine_rack" => 0.19,
-                    _ => 0.05,
+                let Some(rad) = h.finger_clearance else {
+                    continue;
                 };
                 let mut q = env.data().body_pos(scene.instances[k].root_body);
                 if inst.def.kind == crate::world::assets::AssetKind::Movable
@@ -112,9 +101,9 @@ pub(crate) fn side_clearance(
                     // it will have been moved away by then.
                     continue;
                 }
-                if inst.def.category == "flat_stove" {
+                if h.clearance_centre != [0.0; 3] {
                     let b = scene.instances[k].root_body;
-                    let o = qrot(env.data().body_quat(b), [0.1, 0.0, 0.0]);
+                    let o = qrot(env.data().body_quat(b), h.clearance_centre);
                     q = add(q, o);
                 }
                 let d = ((q[0] - g[0]).powi(2) + (q[1] - g[1]).powi(2)).sqrt() - rad;
@@ -147,22 +136,17 @@ pub(crate) fn horizontal_reach(p: [f64; 3]) -> f64 {
 }
 
 /// Height of a held object's origin above the destination object's origin when placed.
-pub(crate) fn place_height(obj: &str, dest: &str) -> f64 {
+pub(crate) fn place_height(obj: Option<Category>, dest: Option<Category>) -> f64 {
     match (obj, dest) {
-        (_, "plate") => 0.0015,
-        ("cream_cheese", "akita_black_bowl") => 0.05,
+        (_, Some(Category::Plate)) => 0.0015,
+        (Some(Category::CreamCheese), Some(Category::AkitaBlackBowl)) => 0.05,
         _ => 0.02,
     }
 }
 
 /// Height of a held object's origin above a region site when placed.
-pub(crate) fn site_place_height(obj: &str, region: &str) -> f64 {
-    let bottom = match obj {
-        "akita_black_bowl" => 0.002,
-        "wine_bottle" => 0.001,
-        "cream_cheese" => -0.009,
-        _ => 0.0,
-    };
+pub(crate) fn site_place_height(obj: &AssetDef, region: &str) -> f64 {
+    let bottom = obj.handling.site_bottom;
     let surface = if region.ends_with("cook_region") {
         0.006
     } else if region.ends_with("top_side") {

@@ -6,6 +6,7 @@ use super::geometry::*;
 use super::{Builder, CLOSE, OPEN};
 use crate::expert::math::qrot;
 use crate::expert::op::{Op, Point, Target};
+use crate::task::Category;
 
 /// Where and how to take an object.
 pub(super) enum GraspAt {
@@ -27,7 +28,7 @@ impl Builder<'_> {
     pub(super) fn grasp_offset(&mut self, obj: usize) -> GraspAt {
         let cat = self.cat(obj);
         let (off, local, above) = match cat {
-            "akita_black_bowl"
+            Some(Category::AkitaBlackBowl)
                 if self.near_rim || horizontal_reach(self.expected_pos(obj)) > 0.72 =>
             {
                 // Far out (or under an open drawer): yaw the hand by 90° and pinch the near (−x) rim.
@@ -37,7 +38,7 @@ impl Builder<'_> {
                     0.07,
                 )
             }
-            "akita_black_bowl" => {
+            Some(Category::AkitaBlackBowl) => {
                 // Pinch the rim wall at ±y (fingers open along world y). Where both sides are free here,
                 // take the one that is free at the destination (the hand keeps that side there).
                 let mut coin = self.vary && self.rng.random_bool(0.5);
@@ -52,7 +53,7 @@ impl Builder<'_> {
                     dest: self.next_dest,
                 };
             }
-            "wine_bottle" => (
+            Some(Category::WineBottle) => (
                 [
                     self.jit(0.002),
                     self.jit(0.002),
@@ -61,8 +62,8 @@ impl Builder<'_> {
                 false,
                 0.08,
             ),
-            "cream_cheese" => ([self.jit(0.006), self.jit(0.002), 0.003], false, 0.08),
-            "basket" => {
+            Some(Category::CreamCheese) => ([self.jit(0.006), self.jit(0.002), 0.003], false, 0.08),
+            Some(Category::Basket) => {
                 // The walls at local ±x face world ±y (placement yaw π/2); pinch the one nearer y = 0.
                 let p = self.pos(obj);
                 let q = self
@@ -77,7 +78,14 @@ impl Builder<'_> {
                 };
                 ([side * 0.082, self.jit(0.01), 0.122], true, 0.08)
             }
-            _ => ([0.0, 0.0, 0.02], false, 0.08),
+            Some(
+                Category::Plate
+                | Category::WineRack
+                | Category::FlatStove
+                | Category::WoodenCabinet
+                | Category::WhiteCabinet,
+            )
+            | None => ([0.0, 0.0, 0.02], false, 0.08),
         };
         GraspAt::Fixed { off, local, above }
     }
@@ -116,10 +124,11 @@ impl Builder<'_> {
                 },
             ),
         };
-        let far = self.cat(obj) == "akita_black_bowl"
+        let far = self.cat(obj) == Some(Category::AkitaBlackBowl)
             && (self.near_rim || horizontal_reach(self.expected_pos(obj)) > 0.72);
         let want_yaw = if far
-            || (self.cat(obj) == "wine_bottle" && self.hand_blocked_along_y(self.expected_pos(obj)))
+            || (self.cat(obj) == Some(Category::WineBottle)
+                && self.hand_blocked_along_y(self.expected_pos(obj)))
         {
             std::f64::consts::FRAC_PI_2
         } else {
@@ -136,7 +145,7 @@ impl Builder<'_> {
             let by_cabinet = self.last_dest.is_some_and(|d| {
                 self.scene.instances.iter().any(|i| {
                     let q = self.env.data().body_pos(i.root_body);
-                    i.def.category == "wooden_cabinet"
+                    i.def.builtin == Some(Category::WoodenCabinet)
                         && ((q[0] - d[0]).powi(2) + (q[1] - d[1]).powi(2)).sqrt() < 0.32
                 })
             });
@@ -149,7 +158,7 @@ impl Builder<'_> {
                 max: 25,
             });
         }
-        if self.near_rim && self.cat(obj) == "akita_black_bowl" {
+        if self.near_rim && self.cat(obj) == Some(Category::AkitaBlackBowl) {
             // Under an open drawer: the hand (along x) reaches 10 cm past the rim, so it comes down
             // 7.5 cm further out, below the drawer's bottom, and slides in.
             let body = |x: f64, z: f64| Point::Body {
@@ -191,10 +200,8 @@ impl Builder<'_> {
         let clearance = |dx: f64, dy: f64| -> f64 {
             let mut best = f64::MAX;
             for inst in &self.scene.instances {
-                let rad = match inst.def.category {
-                    "wine_rack" => 0.19,
-                    "wooden_cabinet" => 0.17,
-                    _ => continue,
+                let Some(rad) = inst.def.handling.hand_clearance else {
+                    continue;
                 };
                 let q = self.env.data().body_pos(inst.root_body);
                 for t in [-1.0, -0.5, 0.0, 0.5, 1.0] {
@@ -220,7 +227,7 @@ impl Builder<'_> {
         self.scene.instances.iter().enumerate().any(|(k, inst)| {
             if k == obj
                 || inst.def.kind != crate::world::assets::AssetKind::Movable
-                || inst.def.category == "plate"
+                || inst.def.handling.flat
             {
                 return false;
             }

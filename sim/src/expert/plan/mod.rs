@@ -4,7 +4,7 @@ use rand::Rng;
 use rand_chacha::ChaCha8Rng;
 
 use crate::expert::op::{Op, Point, Target};
-use crate::task::{Atom, Goal, Predicate, TaskSpec};
+use crate::task::{Atom, Category, Goal, Predicate, TaskSpec};
 use crate::world::env::Env;
 use crate::world::scene::{Scene, TABLE_TOP};
 use geometry::*;
@@ -90,8 +90,8 @@ impl<'a> Builder<'a> {
         self.scene.instance(name)
     }
 
-    fn cat(&self, i: usize) -> &'static str {
-        self.scene.instances[i].def.category
+    fn cat(&self, i: usize) -> Option<Category> {
+        self.scene.instances[i].def.builtin
     }
 
     fn pos(&self, i: usize) -> [f64; 3] {
@@ -211,7 +211,7 @@ impl<'a> Builder<'a> {
                 if let Some(d) = self.inst(dest) {
                     // Object on object.
                     let dz = place_height(cat, self.cat(d));
-                    let drop = self.cat(d) == "akita_black_bowl";
+                    let drop = self.cat(d) == Some(Category::AkitaBlackBowl);
                     self.pick_place(
                         obj,
                         Point::Body {
@@ -227,15 +227,24 @@ impl<'a> Builder<'a> {
                     let Some(site) = r.site else { return };
                     let on_rack = r
                         .parent
-                        .is_some_and(|p| self.scene.instances[p].def.category == "wine_rack");
+                        .is_some_and(|p| self.cat(p) == Some(Category::WineRack));
                     match cat {
-                        "wine_bottle" if on_rack => {
+                        Some(Category::WineBottle) if on_rack => {
                             self.lay_in_rack(obj, r.parent.unwrap_or_default(), n)
                         }
-                        "plate" => self.push_to(obj, site, n),
-                        "basket" => self.drag_basket(obj, site, n),
-                        _ => {
-                            let dz = site_place_height(cat, dest);
+                        Some(Category::Plate) => self.push_to(obj, site, n),
+                        Some(Category::Basket) => self.drag_basket(obj, site, n),
+                        Some(
+                            Category::AkitaBlackBowl
+                            | Category::CreamCheese
+                            | Category::WineBottle
+                            | Category::WineRack
+                            | Category::FlatStove
+                            | Category::WoodenCabinet
+                            | Category::WhiteCabinet,
+                        )
+                        | None => {
+                            let dz = site_place_height(self.scene.instances[obj].def, dest);
                             self.pick_place(
                                 obj,
                                 Point::Site {

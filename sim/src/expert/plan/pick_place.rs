@@ -3,16 +3,13 @@
 use super::geometry::*;
 use super::{Builder, CLOSE, OPEN};
 use crate::expert::op::{Op, Point, Target};
+use crate::task::Category;
 use crate::world::scene::TABLE_TOP;
 
 impl Builder<'_> {
     /// Height of the held object's origin while carrying.
     pub(super) fn carry_z(&self, obj: usize, over_basket: bool) -> f64 {
-        let base = match self.cat(obj) {
-            "wine_bottle" => TABLE_TOP + 0.10,
-            "cream_cheese" => TABLE_TOP + 0.09,
-            _ => TABLE_TOP + 0.115,
-        };
+        let base = TABLE_TOP + self.scene.instances[obj].def.handling.carry_height;
         if over_basket { TABLE_TOP + 0.17 } else { base }
     }
 
@@ -43,8 +40,9 @@ impl Builder<'_> {
             Point::Site { site, .. } => self.env.data().site_pos(*site),
             Point::Abs(p) => *p,
         });
-        let into_basket =
-            drop && matches!(&to, Point::Site { .. }) && self.cat(obj) == "cream_cheese";
+        let into_basket = drop
+            && matches!(&to, Point::Site { .. })
+            && self.cat(obj) == Some(Category::CreamCheese);
         let to = self.within_reach(to);
         let before = self.expected_pos(obj);
         if let Point::Body { inst, .. } = &to {
@@ -77,7 +75,7 @@ impl Builder<'_> {
                 cz = cz.max(sz + 0.05);
             }
         }
-        if self.near_rim && self.cat(obj) == "akita_black_bowl" {
+        if self.near_rim && self.cat(obj) == Some(Category::AkitaBlackBowl) {
             // Out from under the open drawer before lifting.
             self.mv(Target::Rel([-0.06, 0.0, 0.004]), 0.01, 20, 12.0);
         }

@@ -22,11 +22,7 @@ impl Builder<'_> {
             }
             let o = self.env.data().body_pos(inst.root_body);
             if (o[0] - gx).abs() < 0.069 + 0.045 && o[1] < gy {
-                let r = if inst.def.category == "cream_cheese" {
-                    0.0215
-                } else {
-                    0.055
-                };
+                let r = inst.def.handling.push_clearance;
                 gy = gy.max(o[1] + r + 0.069 + 0.01);
             }
         }

@@ -258,7 +258,8 @@ pub fn pack_asset_def(
     category: &str,
     movable: bool,
 ) -> Result<&'static crate::world::assets::AssetDef, ComposeError> {
-    use crate::world::assets::{Articulation, AssetDef, AssetKind, SiteDef};
+    use crate::task::Category;
+    use crate::world::assets::{Articulation, AssetDef, AssetKind, Extent, Handling, SiteDef};
     use std::sync::{Mutex, OnceLock};
     type Cache = Mutex<HashMap<(String, bool), &'static AssetDef>>;
     static CACHE: OnceLock<Cache> = OnceLock::new();
@@ -287,6 +288,9 @@ pub fn pack_asset_def(
     };
     let def: &'static AssetDef = Box::leak(Box::new(AssetDef {
         category: leak(category.to_string()),
+        builtin: Category::from_name(category),
+        extent: Extent::GENERIC,
+        handling: Handling::GENERIC,
         kind: if movable {
             AssetKind::Movable
         } else {

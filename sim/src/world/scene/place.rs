@@ -116,7 +116,7 @@ impl Scene {
                 .ok_or_else(|| SceneError::Init(format!("{atom}: not movable")))?;
             let p = data.site_pos(site);
             let half = self.model.site_size(site);
-            let (bottom, _, _) = true_extent(inst.def.category);
+            let bottom = inst.def.extent.bottom;
             let z = p[2] - half[2].min(0.01) - bottom + 0.005;
             let q = inst.def.placement_quat;
             data.qpos_mut()[adr..adr + 7].copy_from_slice(&[p[0], p[1], z, q[0], q[1], q[2], q[3]]);
@@ -148,8 +148,8 @@ impl Scene {
                         data.body_pos(ib.root_body).to_vec()
                     }
                 };
-                let (_, top_b, _) = true_extent(ib.def.category);
-                let (bot_a, _, _) = true_extent(ia.def.category);
+                let top_b = ib.def.extent.top;
+                let bot_a = ia.def.extent.bottom;
                 let q = ia.def.placement_quat;
                 data.qpos_mut()[aa..aa + 7].copy_from_slice(&[
                     qb[0],
@@ -199,7 +199,7 @@ impl Scene {
                 let m = inst.mocap.expect("fixtures are mocap bodies");
                 data.mocap_pos_mut()[3 * m..3 * m + 3].copy_from_slice(&[x, y, z]);
                 data.mocap_quat_mut()[4 * m..4 * m + 4].copy_from_slice(&assets::yaw_quat(a));
-                placed.push(Placed::fixture(def.category, x, y, off[2], a));
+                placed.push(Placed::fixture(def.extent.footprint, x, y, off[2], a));
                 Ok(())
             }
             AssetKind::Movable => {
@@ -216,7 +216,7 @@ impl Scene {
                 // we keep draws inside the region (1 mm margin) so every init relation holds.
                 let (x0, x1) = clip_range(x0, x1, rect[0], rect[2]);
                 let (y0, y1) = clip_range(y0, y1, rect[1], rect[3]);
-                let (bottom, _, foot) = true_extent(def.category);
+                let (bottom, foot) = (def.extent.bottom, def.extent.radius);
                 let off = self.arena.workspace_offset();
                 let z = off[2] - bottom + 0.005;
                 const TRIES: usize = 5000;
@@ -241,29 +241,6 @@ impl Scene {
                 Err(SceneError::Placement(inst.name.clone(), 2 * TRIES))
             }
         }
-    }
-}
-
-/// True geometry of the built-in assets: (bottom z, top z, footprint radius) relative to the origin.
-fn true_extent(category: &str) -> (f64, f64, f64) {
-    match category {
-        "akita_black_bowl" => (0.0, 0.052, 0.054),
-        "plate" => (0.0, 0.0164, 0.069),
-        "basket" => (0.0042, 0.1457, 0.116),
-        "cream_cheese" => (-0.009, 0.009, 0.046),
-        "wine_bottle" => (0.001, 0.158, 0.022),
-        _ => (0.0, 0.1, 0.05),
-    }
-}
-
-/// Fixture footprint: local AABB (x0, y0, x1, y1) with drawers closed / knob home.
-fn fixture_footprint(category: &str) -> [f64; 4] {
-    match category {
-        // Drawers may open by 0.16 m toward local −y, handles stick out 3 cm more.
-        "wooden_cabinet" => [-0.128, -0.16, 0.128, 0.127],
-        "flat_stove" => [-0.052, -0.095, 0.245, 0.095],
-        "wine_rack" => [-0.135, -0.127, 0.135, 0.127],
-        _ => [-0.05, -0.05, 0.05, 0.05],
     }
 }
 
@@ -341,7 +318,7 @@ impl Placed {
         }
     }
 
-    fn fixture(category: &str, x: f64, y: f64, z: f64, yaw: f64) -> Placed {
+    fn fixture(footprint: [f64; 4], x: f64, y: f64, z: f64, yaw: f64) -> Placed {
         Placed {
             x,
             y,
@@ -349,7 +326,7 @@ impl Placed {
             radius: 0.0,
             top_offset: 0.0,
             foot: Foot::Box {
-                rect: fixture_footprint(category),
+                rect: footprint,
                 yaw,
             },
         }
