@@ -1,4 +1,4 @@
-//! Helpers for the command line and examples: throughput figures ([`bench`]) and contact sheets of
+//! Helpers for the command line and examples: throughput figures ([`bench`](mod@bench)) and contact sheets of
 //! rendered frames ([`sheet`]).
 
 pub mod bench;

@@ -8,7 +8,7 @@ use std::hash::{Hash, Hasher};
 /// `Display` gives `file:line:col: message`, and the message says what was expected.
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub struct BddlError {
-    /// The file name given to [`parse_named`] (`<input>` for [`parse`]).
+    /// The file name given to [`parse_named`](super::parse_named) (`<input>` for [`parse`](super::parse())).
     pub file: String,
     /// 1-based line.
     pub line: u32,

@@ -1,6 +1,6 @@
 //! BDDL problem files as LIBERO reads them (libero.md §1), plus LIBERO-Mem's nested goals.
 //!
-//! [`parse`] turns the text into a typed [`Problem`]; [`print`] turns a `Problem` back into BDDL text such
+//! [`parse`] turns the text into a typed [`Problem`]; [`print()`] turns a `Problem` back into BDDL text such
 //! that `parse(print(p)) == p`.
 //!
 //! What LIBERO does and we do too:
