@@ -25,7 +25,7 @@ fn inst(name: &str, category: &str) -> InstanceSpec {
 
 fn on(a: &str, b: &str) -> AtomSpec {
     AtomSpec {
-        predicate: "on".into(),
+        predicate: sim::task::Predicate::On,
         args: vec![a.into(), b.into()],
     }
 }
@@ -228,7 +228,7 @@ fn placement_is_seeded_and_init_relations_hold_after_settling() {
         let p = Predicates::new(&scene, &a);
         for atom in &scene.spec.init {
             assert!(
-                p.eval(&atom.predicate, &atom.args).unwrap(),
+                p.eval(atom.predicate, &atom.args).unwrap(),
                 "seed {seed}: ({atom}) false after settling"
             );
         }

@@ -5,7 +5,8 @@ use std::f64::consts::PI;
 
 use proptest::prelude::*;
 use sim::task::bddl::{
-    self, Atom, BddlError, Goal, Instance, PREDICATES, Problem, ProblemClass, Region, Span,
+    self, Atom, BddlError, Goal, Instance, PREDICATES, Predicate, Problem, ProblemClass, Region,
+    Span,
 };
 
 fn fixture(name: &str) -> Problem {
@@ -485,8 +486,9 @@ fn arb_atom(names: Vec<String>) -> impl Strategy<Value = Atom> {
     )
         .prop_flat_map(|(i, args)| {
             let (pred, lo, hi) = PREDICATES[i];
+            let predicate = Predicate::from_name(pred).unwrap();
             (lo..=hi).prop_map(move |n| Atom {
-                predicate: pred.to_string(),
+                predicate,
                 args: args[..n].to_vec(),
                 span: Span::default(),
             })

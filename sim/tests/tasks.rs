@@ -37,7 +37,7 @@ fn every_task_resets_validly_for_20_seeds() {
             let p = env.predicates().unwrap();
             for atom in &scene.spec.init {
                 assert!(
-                    p.eval(&atom.predicate, &atom.args).unwrap(),
+                    p.eval(atom.predicate, &atom.args).unwrap(),
                     "{} seed {seed}: ({atom}) false",
                     task.id
                 );

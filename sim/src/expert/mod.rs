@@ -17,13 +17,17 @@ use nalgebra::{Matrix3, Vector3};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
-use crate::controller::orientation_error;
-use crate::env::{Env, EnvConfig, EnvError, Observation};
-use crate::scene::Scene;
-use crate::task::{Atom, TaskSpec};
+use crate::task::{Atom, Category, TaskSpec};
+use crate::world::controller::orientation_error;
+use crate::world::env::{Env, EnvConfig, EnvError, Observation};
+use crate::world::scene::Scene;
 
+pub mod math;
+pub mod op;
 mod plan;
 
+use math::{add, gaussian, norm, qrot, sub};
+pub use op::{Op, Point, Target};
 pub use plan::subgoal_branches;
 
 /// Expert settings.
@@ -45,179 +49,6 @@ impl Default for ExpertConfig {
             hold_steps: 5,
         }
     }
-}
-
-/// Where a target point comes from.
-#[derive(Debug, Clone, PartialEq)]
-pub enum Point {
-    /// A fixed world point.
-    Abs([f64; 3]),
-    /// An instance's root body position plus an offset given in the instance's frame (`local`) or in
-    /// the world frame.
-    Body {
-        /// Instance index in [`Scene::instances`].
-        inst: usize,
-        /// Offset.
-        off: [f64; 3],
-        /// Whether `off` is expressed in the body frame.
-        local: bool,
-    },
-    /// A bowl's rim on its freer ±y side (decided on the live state, and where given also on the
-    /// neighbourhood of the destination the hand will carry it to): the body position plus
-    /// `(off.x, ±off.y, off.z)`; `coin` breaks ties.
-    Rim {
-        /// Instance.
-        inst: usize,
-        /// Offset (y = rim radius).
-        off: [f64; 3],
-        /// Tie-break.
-        coin: bool,
-        /// Where the bowl goes next (the side must be free there too).
-        dest: Option<[f64; 3]>,
-    },
-    /// A site position plus a world offset.
-    Site {
-        /// Site id.
-        site: usize,
-        /// World offset.
-        off: [f64; 3],
-    },
-}
-
-/// What a move drives to.
-#[derive(Debug, Clone, PartialEq)]
-pub enum Target {
-    /// The grip site to a point.
-    Grip(Point),
-    /// The held instance's origin to a point (the hand follows with the current hand–object offset).
-    Carry {
-        /// Held instance.
-        held: usize,
-        /// Where its origin should go.
-        to: Point,
-    },
-    /// The grip site to its position at the start of the op plus a world offset.
-    Rel([f64; 3]),
-    /// The grip site to its start position with z replaced.
-    RelZ(f64),
-    /// From the start position: up by `dz`, and horizontally towards the shoulder until at most `h`
-    /// metres from it (far out, a high straight arm is a singularity OSC cannot leave).
-    PullIn {
-        /// Horizontal distance from the shoulder to get within.
-        h: f64,
-        /// Lift.
-        dz: f64,
-    },
-}
-
-/// One low-level step of a plan.
-#[derive(Debug, Clone, PartialEq)]
-pub enum Op {
-    /// Proportional move of the grip site to `target` (clipped to [−1, 1]) until within `tol` metres or
-    /// `max` steps.
-    Move {
-        /// Target.
-        target: Target,
-        /// Gripper command during the move.
-        grip: f32,
-        /// Tolerance (m).
-        tol: f64,
-        /// Step limit.
-        max: usize,
-        /// Proportional gain (action units per metre).
-        gain: f64,
-        /// Also stop as soon as the pending atom holds (placing).
-        until_pending: bool,
-    },
-    /// Rotate the hand about world z to `yaw` radians from its initial orientation.
-    Yaw {
-        /// Yaw relative to the initial hand orientation.
-        yaw: f64,
-        /// Gripper command.
-        grip: f32,
-        /// Step limit.
-        max: usize,
-    },
-    /// Rotate the hand to `Rtilt · Rz(yaw) · R0` (R0 the initial orientation, Rtilt a rotation by `tilt`
-    /// radians about the horizontal axis `axis`), keeping the grip site in place; later moves hold that
-    /// orientation while `hold` (until the next `Orient`).
-    Orient {
-        /// Yaw about world z.
-        yaw: f64,
-        /// Horizontal tilt axis (world, unit).
-        axis: [f64; 3],
-        /// Tilt angle.
-        tilt: f64,
-        /// Gripper command.
-        grip: f32,
-        /// Step limit.
-        max: usize,
-        /// Hold the orientation during later moves.
-        hold: bool,
-    },
-    /// Rotate the hand to `rot · R0` (R0 the initial orientation; `rot` row-major), keeping the grip site
-    /// in place; later moves hold that orientation while `hold` (until the next rotation op).
-    Attitude {
-        /// World rotation applied to the initial orientation, row-major.
-        rot: [f64; 9],
-        /// Gripper command.
-        grip: f32,
-        /// Step limit.
-        max: usize,
-        /// Hold the orientation during later moves.
-        hold: bool,
-    },
-    /// Gripper command for a number of steps, arm still.
-    Grip {
-        /// +1 close, −1 open.
-        cmd: f32,
-        /// Steps.
-        steps: usize,
-    },
-    /// Stay still for a number of steps.
-    Hold {
-        /// Steps.
-        steps: usize,
-        /// Gripper command.
-        grip: f32,
-    },
-    /// Stay still until the goal tracker reports at least `n` satisfied subgoals (or `max` steps).
-    WaitSatisfied {
-        /// Subgoal count.
-        n: usize,
-        /// Step limit.
-        max: usize,
-        /// Gripper command.
-        grip: f32,
-    },
-    /// Skip the next `count` ops when the goal tracker reports at least `n` satisfied subgoals (a
-    /// corrective retry that is only needed when a placement was not registered).
-    SkipIfSatisfied {
-        /// Subgoal count.
-        n: usize,
-        /// Ops to skip.
-        count: usize,
-    },
-    /// Stay still until the pending atom has been false for `n` steps since the last append.
-    WaitNonlive {
-        /// Steps.
-        n: usize,
-        /// Step limit.
-        max: usize,
-        /// Gripper command.
-        grip: f32,
-    },
-    /// Stay still until `atom` holds (or `max` steps).
-    WaitAtom {
-        /// The atom.
-        atom: Atom,
-        /// Step limit.
-        max: usize,
-        /// Gripper command.
-        grip: f32,
-    },
-    /// Marks the atom the plan now works towards (for [`Op::WaitNonlive`]).
-    Pending(Option<Atom>),
 }
 
 /// Result of one expert episode.
@@ -360,7 +191,7 @@ impl Expert {
                 let objs: Vec<[f64; 3]> = scene
                     .instances
                     .iter()
-                    .filter(|i| i.def.kind == crate::assets::AssetKind::Movable)
+                    .filter(|i| i.def.kind == crate::world::assets::AssetKind::Movable)
                     .map(|i| env.data().body_pos(i.root_body))
                     .collect();
                 eprintln!(
@@ -384,7 +215,7 @@ impl Expert {
     fn pending_holds(&self, env: &Env) -> bool {
         self.pending.as_ref().is_some_and(|a| {
             env.predicates()
-                .and_then(|p| p.eval(&a.predicate, &a.args).ok())
+                .and_then(|p| p.eval(a.predicate, &a.args).ok())
                 .unwrap_or(false)
         })
     }
@@ -429,8 +260,8 @@ impl Expert {
                 if until_pending
                     && e[2] < -0.002
                     && let Target::Carry { held, .. } = target
-                    && scene.instances[held].def.category == "wine_bottle"
-                    && plan::horizontal_reach(eef) > 0.74
+                    && scene.instances[held].def.builtin == Some(Category::WineBottle)
+                    && plan::geometry::horizontal_reach(eef) > 0.74
                 {
                     // Setting a bottle down far out: the stretched arm barely answers the small
                     // proportional command near the surface; keep pressing down until it touches.
@@ -514,7 +345,7 @@ impl Expert {
             Op::WaitAtom { atom, max, grip } => {
                 let holds = env
                     .predicates()
-                    .and_then(|p| p.eval(&atom.predicate, &atom.args).ok())
+                    .and_then(|p| p.eval(atom.predicate, &atom.args).ok())
                     .unwrap_or(false);
                 (!holds && self.op_steps < max).then_some(still(grip))
             }
@@ -539,7 +370,7 @@ impl Expert {
             Target::Rel(d) => add(start, *d),
             Target::RelZ(z) => [start[0], start[1], *z],
             Target::PullIn { h, dz } => {
-                let (sx, sy) = (plan::SHOULDER[0], plan::SHOULDER[1]);
+                let (sx, sy) = (plan::geometry::SHOULDER[0], plan::geometry::SHOULDER[1]);
                 let d = ((start[0] - sx).powi(2) + (start[1] - sy).powi(2)).sqrt();
                 let k = if d > *h { (d - h) / d } else { 0.0 };
                 [
@@ -558,10 +389,10 @@ impl Expert {
 fn carry_ref(scene: &Scene, env: &Env, held: usize) -> [f64; 3] {
     let b = scene.instances[held].root_body;
     let p = env.data().body_pos(b);
-    if scene.instances[held].def.category != "wine_bottle" {
+    if scene.instances[held].def.builtin != Some(Category::WineBottle) {
         return p;
     }
-    let c = [0.0, 0.0, plan::BOTTLE_NECK];
+    let c = [0.0, 0.0, plan::geometry::BOTTLE_NECK];
     add(p, sub(qrot(env.data().body_quat(b), c), c))
 }
 
@@ -587,7 +418,8 @@ pub fn point(scene: &Scene, env: &Env, p: &Point) -> [f64; 3] {
             dest,
         } => {
             let pos = env.data().body_pos(scene.instances[*inst].root_body);
-            let side = plan::clear_side_both(scene, env, *inst, pos, *dest, off[1], *coin);
+            let side =
+                plan::geometry::clear_side_both(scene, env, *inst, pos, *dest, off[1], *coin);
             add(pos, [off[0], side * off[1], off[2]])
         }
     }
@@ -668,50 +500,11 @@ fn clip(a: [f32; 7]) -> [f32; 7] {
     a.map(|v| v.clamp(-1.0, 1.0))
 }
 
-pub(crate) fn add(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-    [a[0] + b[0], a[1] + b[1], a[2] + b[2]]
-}
-
-pub(crate) fn sub(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
-}
-
-pub(crate) fn norm(a: [f64; 3]) -> f64 {
-    (a[0] * a[0] + a[1] * a[1] + a[2] * a[2]).sqrt()
-}
-
-pub(crate) fn qrot(q: [f64; 4], v: [f64; 3]) -> [f64; 3] {
-    let (w, x, y, z) = (q[0], q[1], q[2], q[3]);
-    // v + 2w(u×v) + 2u×(u×v)
-    let u = [x, y, z];
-    let c1 = cross(u, v);
-    let c2 = cross(u, c1);
-    [
-        v[0] + 2.0 * (w * c1[0] + c2[0]),
-        v[1] + 2.0 * (w * c1[1] + c2[1]),
-        v[2] + 2.0 * (w * c1[2] + c2[2]),
-    ]
-}
-
-fn cross(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-    [
-        a[1] * b[2] - a[2] * b[1],
-        a[2] * b[0] - a[0] * b[2],
-        a[0] * b[1] - a[1] * b[0],
-    ]
-}
-
 fn quat_mat(q: [f64; 4]) -> Matrix3<f64> {
     let uq = nalgebra::UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(
         q[0], q[1], q[2], q[3],
     ));
     uq.to_rotation_matrix().into_inner()
-}
-
-pub(crate) fn gaussian(rng: &mut ChaCha8Rng) -> f64 {
-    let u1: f64 = rng.random_range(f64::MIN_POSITIVE..1.0);
-    let u2: f64 = rng.random();
-    (-2.0 * u1.ln()).sqrt() * (std::f64::consts::TAU * u2).cos()
 }
 
 /// How the expert works and what it cannot do yet; appended to `docs/expert.md` by `sim expert-eval

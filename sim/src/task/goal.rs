@@ -43,7 +43,7 @@
 
 use std::collections::{HashMap, HashSet};
 
-use super::bddl::{Atom, Goal, Problem};
+use super::bddl::{Atom, Goal, Predicate, Problem, short_words};
 
 /// Debounce thresholds. The comparisons are strict: a subgoal is appended when it holds and
 /// `live > min_true && nonlive > min_false`; overshoot when the final subgoal does not hold and
@@ -501,7 +501,7 @@ impl Namer {
                 .strip_prefix(cat.as_str())
                 .and_then(|r| r.strip_prefix('_'))
             {
-                return format!("{} {}", short_category(cat), rest.replace('_', " "));
+                return format!("{} {}", short_words(cat), rest.replace('_', " "));
             }
             return name.replace('_', " ");
         }
@@ -526,28 +526,29 @@ impl Namer {
 
     fn atom(&self, a: &Atom) -> String {
         let e: Vec<String> = a.args.iter().map(|x| self.entity(x)).collect();
-        match (a.predicate.as_str(), e.as_slice()) {
-            ("on", [x, y]) if self.is_workspace_region(&a.args[1]) => format!("{x} in {y}"),
-            ("on" | "in", [x, y]) => format!("{x} {} {y}", a.predicate),
-            ("open", [x]) => format!("open {x}"),
-            ("close", [x]) => format!("close {x}"),
-            ("turnon", [x]) => format!("turn on {x}"),
-            ("turnoff", [x]) => format!("turn off {x}"),
-            ("up", [x]) => format!("{x} up"),
-            (p, []) => p.to_string(),
-            (p, e) => format!("{p} {}", e.join(" ")),
-        }
-    }
-}
-
-/// Short words for the categories the shipped tasks use; others keep their words.
-fn short_category(cat: &str) -> String {
-    match cat {
-        "akita_black_bowl" => "bowl".into(),
-        "wine_bottle" => "bottle".into(),
-        "wooden_cabinet" | "white_cabinet" => "cabinet".into(),
-        "flat_stove" => "stove".into(),
-        "wine_rack" => "rack".into(),
-        c => c.replace('_', " "),
+        let p = a.predicate;
+        let words = |prefix: &str, suffix: &str| match e.as_slice() {
+            [x] => Some(format!("{prefix}{x}{suffix}")),
+            _ => None,
+        };
+        let text = match p {
+            Predicate::On | Predicate::In => match e.as_slice() {
+                [x, y] if p == Predicate::On && self.is_workspace_region(&a.args[1]) => {
+                    Some(format!("{x} in {y}"))
+                }
+                [x, y] => Some(format!("{x} {p} {y}")),
+                _ => None,
+            },
+            Predicate::Open => words("open ", ""),
+            Predicate::Close => words("close ", ""),
+            Predicate::TurnOn => words("turn on ", ""),
+            Predicate::TurnOff => words("turn off ", ""),
+            Predicate::Up => words("", " up"),
+            Predicate::True | Predicate::False | Predicate::PrintJointState => None,
+        };
+        text.unwrap_or_else(|| match e.as_slice() {
+            [] => p.to_string(),
+            e => format!("{p} {}", e.join(" ")),
+        })
     }
 }

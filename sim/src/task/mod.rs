@@ -3,6 +3,9 @@
 //!
 //! Nothing here touches MuJoCo or rendering: predicates reach the tracker through a caller-supplied
 //! oracle (`&mut dyn FnMut(&Atom) -> bool`), so the whole module is testable with predicate traces.
+//! The LIBERO pack's BDDL files are found through [`crate::cache`] (paths only); `tests/layers.rs`
+//! checks that no file here reaches `engine`, `world` or `pack`. The domain words are closed enums:
+//! [`Predicate`] (LIBERO's registry) and [`Category`] (the categories whose facts the crate knows).
 //!
 //! ```
 //! use sim::task::{bddl::Atom, registry};
@@ -22,7 +25,8 @@ pub mod goal;
 pub mod registry;
 
 pub use bddl::{
-    Atom, BddlError, Goal, Instance, Problem, ProblemClass, Region, Span, parse, parse_named, print,
+    Atom, BddlError, Category, Goal, Instance, Predicate, Problem, ProblemClass, Region, Span,
+    parse, parse_named, print,
 };
 pub use goal::{Debounce, GoalError, GoalTracker, Progress};
 pub use registry::{Suite, TaskError, TaskSpec, list, resolve, resolve_with_repeats};

@@ -497,7 +497,7 @@ fn with_repeats(t: &Shipped, asked: &str, n: usize) -> Result<TaskSpec, TaskErro
 /// A task of LIBERO's pack (`libero_spatial/<stem>`, …): its BDDL from the installed pack, LIBERO's
 /// plain `And` goal, OpenVLA's step budget for the suite.
 fn load_pack_task(suite: Suite, stem: &str, asked: &str) -> Result<TaskSpec, TaskError> {
-    let pack = crate::pack::LiberoPack::locate_default().map_err(|e| TaskError::Pack {
+    let pack = crate::cache::LiberoPack::locate_default().map_err(|e| TaskError::Pack {
         id: asked.to_string(),
         message: e.to_string(),
     })?;

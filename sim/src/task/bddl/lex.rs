@@ -1,7 +1,7 @@
 //! Tokens and the s-expression tree, as bddl's `scan_tokens` builds them: comments removed, text
 //! lowercased, `(`/`)` or runs of non-space non-paren characters, exactly one top-level expression.
 
-use super::{BddlError, Span};
+use super::error::{BddlError, Span};
 
 /// A node of the s-expression tree.
 #[derive(Clone, Debug)]

@@ -2,8 +2,10 @@
 
 use std::collections::HashMap;
 
+use super::ast::{Atom, Goal, Instance, Problem, ProblemClass, Region};
+use super::error::{BddlError, Span};
 use super::lex::Sexp;
-use super::{Atom, BddlError, Goal, Instance, PREDICATES, Problem, ProblemClass, Region, Span};
+use super::predicate::Predicate;
 
 type Result<T> = std::result::Result<T, BddlError>;
 
@@ -443,8 +445,8 @@ fn known_name(s: &Sexp, names: &HashMap<String, Span>) -> Result<String> {
 /// A ground atom `(pred arg...)` over declared names.
 fn atom(s: &Sexp, names: &HashMap<String, Span>) -> Result<Atom> {
     let (pred, args, span) = headed(s, "an atom `(<predicate> <arg>...)`")?;
-    let Some((_, lo, hi)) = PREDICATES.iter().find(|(p, _, _)| *p == pred) else {
-        let known: Vec<&str> = PREDICATES.iter().map(|(p, _, _)| *p).collect();
+    let Some(predicate) = Predicate::from_name(pred) else {
+        let known: Vec<&str> = Predicate::ALL.iter().map(|p| p.name()).collect();
         return Err(err(
             span,
             format!(
@@ -453,7 +455,8 @@ fn atom(s: &Sexp, names: &HashMap<String, Span>) -> Result<Atom> {
             ),
         ));
     };
-    if args.len() < *lo || args.len() > *hi {
+    let (lo, hi) = predicate.arity();
+    if args.len() < lo || args.len() > hi {
         let want = if lo == hi {
             format!("{lo}")
         } else {
@@ -472,7 +475,7 @@ fn atom(s: &Sexp, names: &HashMap<String, Span>) -> Result<Atom> {
         .map(|a| known_name(a, names))
         .collect::<Result<Vec<_>>>()?;
     Ok(Atom {
-        predicate: pred.to_string(),
+        predicate,
         args,
         span,
     })

@@ -6,16 +6,7 @@
 
 use std::fmt::Write;
 
-use super::{Goal, Instance, Problem};
-
-/// LIBERO's capitalisation of a predicate or goal operator: `on` → `On`, `turnon` → `Turnon`.
-pub(crate) fn predicate_name(p: &str) -> String {
-    let mut c = p.chars();
-    match c.next() {
-        Some(f) => f.to_uppercase().chain(c).collect(),
-        None => String::new(),
-    }
-}
+use super::ast::{Goal, Instance, Problem};
 
 /// Writes `p` as BDDL text.
 pub fn print(p: &Problem) -> String {

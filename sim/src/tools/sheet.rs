@@ -3,7 +3,7 @@
 use font8x8::UnicodeFonts;
 use image::{Rgb, RgbImage};
 
-use crate::render::Frame;
+use crate::engine::render::Frame;
 
 /// Height of the label strip under each tile, in pixels.
 const LABEL_H: u32 = 12;

@@ -10,9 +10,9 @@
 
 use thiserror::Error;
 
-use crate::env::{Env, EnvConfig, EnvError, Observation};
 use crate::expert::Expert;
 use crate::task::TaskSpec;
+use crate::world::env::{Env, EnvConfig, EnvError, Observation};
 
 /// Errors of [`collect`].
 #[derive(Debug, Error)]
@@ -92,7 +92,7 @@ fn state_of(env: &Env, obs: &Observation) -> Vec<f32> {
     let mut s: Vec<f32> = obs.state.to_vec();
     if let Some(scene) = env.scene() {
         for inst in &scene.instances {
-            if inst.def.kind != crate::assets::AssetKind::Movable {
+            if inst.def.kind != crate::world::assets::AssetKind::Movable {
                 continue;
             }
             let p = env.data().body_pos(inst.root_body);

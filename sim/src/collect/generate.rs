@@ -10,10 +10,10 @@ use std::path::{Path, PathBuf};
 use std::sync::Mutex;
 use std::sync::atomic::{AtomicUsize, Ordering};
 
-use crate::env::{Env, EnvConfig};
+use crate::collect::record::{RecordError, Recorder};
 use crate::expert::Expert;
-use crate::record::{RecordError, Recorder};
 use crate::task::TaskSpec;
+use crate::world::env::{Env, EnvConfig};
 
 /// Attempts per episode before giving up.
 pub const MAX_ATTEMPTS: u64 = 8;
@@ -25,7 +25,7 @@ pub const HOLD_STEPS: usize = 10;
 pub enum GenerateError {
     /// The simulator failed.
     #[error(transparent)]
-    Env(#[from] crate::env::EnvError),
+    Env(#[from] crate::world::env::EnvError),
     /// Writing an episode failed.
     #[error(transparent)]
     Record(#[from] RecordError),

@@ -11,7 +11,7 @@
 
 use std::fmt::Write;
 
-use crate::mujoco::{MjError, Model, ObjType};
+use crate::engine::mujoco::{MjError, Model, ObjType};
 
 /// `contype` for table, fixtures and objects.
 pub const ENV_CONTYPE: u32 = 1;
@@ -306,7 +306,7 @@ impl PandaIds {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::mujoco::Data;
+    use crate::engine::mujoco::Data;
     use std::sync::Arc;
 
     fn robot_only() -> String {

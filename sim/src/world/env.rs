@@ -1,7 +1,11 @@
-//! A minimal LIBERO-style environment: the tabletop arena, the Panda, and one free box.
+//! The LIBERO-style environment: a task's world (its BDDL scene from the builtin assets or LIBERO's
+//! pack, with the goal tracked at every step — [`Env::from_task`], [`Env::from_task_with_assets`]), a
+//! bare scene without a goal ([`Env::with_scene`]), or the minimal tabletop with one free box
+//! ([`Env::new`], for benchmarks and rendering checks), each with the Panda.
 //!
-//! `reset(seed)` places the box from a ChaCha stream seeded by `seed` and puts the arm at LIBERO's nominal
-//! configuration; `step(action)` runs LIBERO's control loop (20 Hz over 25 physics substeps of 2 ms, OSC_POSE
+//! `reset(seed)` samples the initial state (fixtures, objects, articulations; the box) from a ChaCha
+//! stream seeded by `seed`, or [`Env::reset_to_init`] starts from one of LIBERO's stored init states,
+//! and puts the arm at LIBERO's nominal configuration; `step(action)` runs LIBERO's control loop (20 Hz over 25 physics substeps of 2 ms, OSC_POSE
 //! goal on the first substep, gripper ramp on every substep) and returns an [`Observation`]. Same seed and
 //! same actions give bit-identical observations, images included.
 
@@ -10,14 +14,14 @@ use std::sync::Arc;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
-use crate::controller::{GripperRamp, OscPose, quat_to_axis_angle};
-use crate::mujoco::{Data, MjError, Model, ObjType};
-use crate::predicates::Predicates;
-use crate::render::Decor;
-use crate::render::{Channels, RenderError, RenderQuality, Renderer};
-use crate::robot::{INIT_FINGERS, INIT_QPOS, PandaIds};
-use crate::scene::{Arena, Scene, SceneError, SceneSpec};
-use crate::task::{Atom, GoalTracker, TaskSpec};
+use crate::engine::mujoco::{Data, MjError, Model, ObjType};
+use crate::engine::render::Decor;
+use crate::engine::render::{Channels, RenderError, RenderQuality, Renderer};
+use crate::task::{Atom, Category, GoalTracker, TaskSpec};
+use crate::world::controller::{GripperRamp, OscPose, quat_to_axis_angle};
+use crate::world::predicates::Predicates;
+use crate::world::robot::{INIT_FINGERS, INIT_QPOS, PandaIds};
+use crate::world::scene::{Arena, Scene, SceneError, SceneSpec};
 
 /// Physics substeps per control step (0.05 s / 0.002 s).
 pub const SUBSTEPS: usize = 25;
@@ -130,10 +134,10 @@ pub fn minimal_scene_xml() -> String {
 <geom name="cube_g" type="box" size="0.02 0.02 0.02" mass="0.1" friction="1 0.005 0.0001" rgba="0.85 0.15 0.12 1" contype="{}" conaffinity="{}" group="1"/>
 </body>
 "#,
-        crate::assets::bits::OBJECT_TYPE,
-        crate::assets::bits::OBJECT_AFFINITY
+        crate::world::assets::bits::OBJECT_TYPE,
+        crate::world::assets::bits::OBJECT_AFFINITY
     );
-    crate::scene::world_xml(Arena::Tabletop, "libero_tabletop_box", "", &cube)
+    crate::world::scene::world_xml(Arena::Tabletop, "libero_tabletop_box", "", &cube)
 }
 
 /// What the environment simulates besides the robot.
@@ -233,7 +237,7 @@ impl Env {
         };
         let scene = Scene::build_with(SceneSpec::from_problem(&task.problem), pack.as_ref())?;
         for a in task.problem.init.iter().chain(task.problem.goal.atoms()) {
-            scene.check_atom(&a.predicate, &a.args)?;
+            scene.check_atom(a.predicate, &a.args)?;
         }
         let tracker = task.tracker();
         let model = scene.model.clone();
@@ -280,7 +284,7 @@ impl Env {
                 .instances
                 .iter()
                 .enumerate()
-                .filter(|(_, i)| i.def.category == "flat_stove")
+                .filter(|(_, i)| i.def.builtin == Some(Category::FlatStove))
                 .filter_map(|(k, i)| {
                     model
                         .id(ObjType::Site, &format!("{}_burner", i.name))
@@ -486,7 +490,7 @@ impl Env {
         let scene = self.scene()?;
         let p = Predicates::new(scene, &self.data);
         for atom in &scene.spec.init {
-            match p.eval(&atom.predicate, &atom.args) {
+            match p.eval(atom.predicate, &atom.args) {
                 Ok(true) => {}
                 Ok(false) => return Some(format!("({atom}) is false after settling")),
                 Err(e) => return Some(format!("({atom}): {e}")),
@@ -534,7 +538,7 @@ impl Env {
             let p = Predicates::new(scene, &self.data);
             // Atoms were checked against the scene at construction; LIBERO's own evaluation errors
             // (In with an object container while touching) count as false.
-            tracker.step(&mut |a: &Atom| p.eval(&a.predicate, &a.args).unwrap_or(false));
+            tracker.step(&mut |a: &Atom| p.eval(a.predicate, &a.args).unwrap_or(false));
         }
     }
 

@@ -7,8 +7,8 @@
 
 use nalgebra::{Matrix3, SMatrix, SVector, Vector3};
 
-use crate::mujoco::Data;
-use crate::robot::{PandaIds, TORQUE_LIMITS};
+use crate::engine::mujoco::Data;
+use crate::world::robot::{PandaIds, TORQUE_LIMITS};
 
 type Mat7 = SMatrix<f64, 7, 7>;
 type Mat6x7 = SMatrix<f64, 6, 7>;

@@ -13,9 +13,9 @@ use data::{
     Segmentation, StepRecord, WriterOptions,
 };
 
-use crate::env::{Env, Observation};
-use crate::mujoco::ObjType;
+use crate::engine::mujoco::ObjType;
 use crate::task::TaskSpec;
+use crate::world::env::{Env, Observation};
 
 /// Contacts (summed over control steps) after which a touched object receives the next subgoal label.
 pub const TOUCH_THRESHOLD: u32 = 20;
@@ -228,7 +228,7 @@ impl Recorder {
 
 /// Boxes and visibility of every instance from an instance-id map `[S, S]`.
 fn annotations(
-    scene: &crate::scene::Scene,
+    scene: &crate::world::scene::Scene,
     ids: &[u16],
     s: usize,
     labels: &[String],

@@ -9,9 +9,11 @@
 //! Frames come back **upright** (row 0 = top of the image), unlike OpenGL's bottom-up rows.
 
 use std::ffi::{CStr, c_char, c_void};
+
+use khronos_egl as egl;
 use std::marker::PhantomData;
 
-use crate::mujoco::{Data, MjError, Model, ObjType, ffi, guard};
+use crate::engine::mujoco::{Data, MjError, Model, ObjType, ffi, guard};
 
 /// Errors from the renderer.
 #[derive(Debug, thiserror::Error)]
@@ -51,55 +53,28 @@ pub type Result<T, E = RenderError> = std::result::Result<T, E>;
 
 // --- EGL, loaded at run time ----------------------------------------------------------------------
 
-type EglDisplay = *mut c_void;
-type EglConfig = *mut c_void;
-type EglContext = *mut c_void;
-type EglInt = i32;
+/// EGL 1.4 entry points from the system's `libEGL.so.1`, opened at run time.
+type Egl = egl::DynamicInstance<egl::EGL1_4>;
 
-const EGL_NONE: EglInt = 0x3038;
-const EGL_EXTENSIONS: EglInt = 0x3055;
-const EGL_VENDOR: EglInt = 0x3053;
 const EGL_PLATFORM_SURFACELESS_MESA: u32 = 0x31DD;
 const EGL_PLATFORM_DEVICE_EXT: u32 = 0x313F;
-const EGL_SURFACE_TYPE: EglInt = 0x3033;
-const EGL_PBUFFER_BIT: EglInt = 0x0001;
-const EGL_RENDERABLE_TYPE: EglInt = 0x3040;
-const EGL_OPENGL_BIT: EglInt = 0x0008;
-const EGL_RED_SIZE: EglInt = 0x3024;
-const EGL_GREEN_SIZE: EglInt = 0x3023;
-const EGL_BLUE_SIZE: EglInt = 0x3022;
-const EGL_ALPHA_SIZE: EglInt = 0x3021;
-const EGL_DEPTH_SIZE: EglInt = 0x3025;
-const EGL_STENCIL_SIZE: EglInt = 0x3026;
-const EGL_OPENGL_API: u32 = 0x30A2;
 const GL_VENDOR: u32 = 0x1F00;
 const GL_RENDERER: u32 = 0x1F01;
 const GL_VERSION: u32 = 0x1F02;
 
-type FnGetProcAddress = unsafe extern "C" fn(*const c_char) -> *mut c_void;
-type FnQueryString = unsafe extern "C" fn(EglDisplay, EglInt) -> *const c_char;
-type FnGetPlatformDisplay = unsafe extern "C" fn(u32, *mut c_void, *const EglInt) -> EglDisplay;
-type FnQueryDevices = unsafe extern "C" fn(EglInt, *mut *mut c_void, *mut EglInt) -> u32;
-type FnInitialize = unsafe extern "C" fn(EglDisplay, *mut EglInt, *mut EglInt) -> u32;
-type FnChooseConfig =
-    unsafe extern "C" fn(EglDisplay, *const EglInt, *mut EglConfig, EglInt, *mut EglInt) -> u32;
-type FnBindApi = unsafe extern "C" fn(u32) -> u32;
-type FnCreateContext =
-    unsafe extern "C" fn(EglDisplay, EglConfig, EglContext, *const EglInt) -> EglContext;
-type FnMakeCurrent = unsafe extern "C" fn(EglDisplay, *mut c_void, *mut c_void, EglContext) -> u32;
-type FnDestroyContext = unsafe extern "C" fn(EglDisplay, EglContext) -> u32;
-type FnGetCurrentContext = unsafe extern "C" fn() -> EglContext;
-type FnGetError = unsafe extern "C" fn() -> EglInt;
+/// `eglGetPlatformDisplayEXT` (EGL_EXT_platform_base), found through `eglGetProcAddress`.
+type FnGetPlatformDisplay =
+    unsafe extern "C" fn(u32, *mut c_void, *const egl::Int) -> egl::EGLDisplay;
+/// `eglQueryDevicesEXT` (EGL_EXT_device_enumeration).
+type FnQueryDevices = unsafe extern "C" fn(egl::Int, *mut *mut c_void, *mut egl::Int) -> u32;
+/// `glGetString`.
 type FnGlGetString = unsafe extern "C" fn(u32) -> *const u8;
 
 /// A current EGL + desktop-GL context with no window (one per thread).
 struct GlContext {
-    _lib: libloading::Library,
-    display: EglDisplay,
-    context: EglContext,
-    make_current: FnMakeCurrent,
-    destroy_context: FnDestroyContext,
-    get_current_context: FnGetCurrentContext,
+    egl: Egl,
+    display: egl::Display,
+    context: egl::Context,
     info: GlInfo,
 }
 
@@ -116,16 +91,6 @@ pub struct GlInfo {
     pub platform: String,
 }
 
-unsafe fn sym<T: Copy>(lib: &libloading::Library, name: &[u8]) -> Result<T> {
-    // SAFETY: the caller names a symbol whose C signature matches T.
-    unsafe { lib.get::<T>(name) }.map(|s| *s).map_err(|e| {
-        RenderError::Gl(format!(
-            "libEGL.so.1 lacks {}: {e}",
-            String::from_utf8_lossy(&name[..name.len() - 1])
-        ))
-    })
-}
-
 fn cstr(p: *const c_char) -> String {
     if p.is_null() {
         String::new()
@@ -135,165 +100,156 @@ fn cstr(p: *const c_char) -> String {
     }
 }
 
+/// The raw code of the thread's last EGL error (0x3000, `EGL_SUCCESS`, if none).
+fn error_code(egl: &Egl) -> egl::Int {
+    egl.get_error().map_or(egl::SUCCESS, |e| e.native())
+}
+
+/// Opens the EGL library `name` (the system's is `libEGL.so.1`, libglvnd's dispatcher); a missing
+/// library is a [`RenderError::Gl`] that names the packages to install.
+fn load_egl(name: &str) -> Result<Egl> {
+    // SAFETY: an EGL library implements the EGL API the instance is typed with.
+    unsafe { Egl::load_required_from_filename(name) }.map_err(|e| {
+        RenderError::Gl(match e {
+            egl::LoadError::Library(l) => format!("cannot open {name} ({l})"),
+            other => format!("{name} is not usable ({other})"),
+        })
+    })
+}
+
 impl GlContext {
     fn new() -> Result<GlContext> {
-        // SAFETY: loading the system's EGL dispatcher; symbols are resolved with their C signatures below.
-        let lib = unsafe { libloading::Library::new("libEGL.so.1") }
-            .map_err(|e| RenderError::Gl(format!("cannot open libEGL.so.1 ({e})")))?;
-        // SAFETY: each symbol is looked up with the signature of the EGL 1.5 specification.
-        unsafe {
-            let get_proc: FnGetProcAddress = sym(&lib, b"eglGetProcAddress\0")?;
-            let query_string: FnQueryString = sym(&lib, b"eglQueryString\0")?;
-            let initialize: FnInitialize = sym(&lib, b"eglInitialize\0")?;
-            let choose_config: FnChooseConfig = sym(&lib, b"eglChooseConfig\0")?;
-            let bind_api: FnBindApi = sym(&lib, b"eglBindAPI\0")?;
-            let create_context: FnCreateContext = sym(&lib, b"eglCreateContext\0")?;
-            let make_current: FnMakeCurrent = sym(&lib, b"eglMakeCurrent\0")?;
-            let destroy_context: FnDestroyContext = sym(&lib, b"eglDestroyContext\0")?;
-            let get_error: FnGetError = sym(&lib, b"eglGetError\0")?;
-            let get_current_context: FnGetCurrentContext = sym(&lib, b"eglGetCurrentContext\0")?;
+        let egl = load_egl("libEGL.so.1")?;
+        let client_ext = egl
+            .query_string(None, egl::EXTENSIONS)
+            .map(|s| s.to_string_lossy().into_owned())
+            .unwrap_or_default();
+        let gpd = egl
+            .get_proc_address("eglGetPlatformDisplayEXT")
+            .ok_or_else(|| RenderError::Gl("EGL has no eglGetPlatformDisplayEXT".into()))?;
+        // SAFETY: eglGetProcAddress returned eglGetPlatformDisplayEXT, whose C signature this is.
+        let get_platform_display: FnGetPlatformDisplay = unsafe { std::mem::transmute(gpd) };
+        // A display of `platform` for `native`, initialised; `None` if it cannot be had.
+        let open = |platform: u32, native: *mut c_void| -> Option<egl::Display> {
+            // SAFETY: a valid platform enum and native handle (null or a device from EGL).
+            let d = unsafe { get_platform_display(platform, native, std::ptr::null()) };
+            if d.is_null() {
+                return None;
+            }
+            // SAFETY: a non-null display handle EGL just returned.
+            let d = unsafe { egl::Display::from_ptr(d) };
+            egl.initialize(d).ok().map(|_| d)
+        };
 
-            let client_ext = cstr(query_string(std::ptr::null_mut(), EGL_EXTENSIONS));
-            let gpd = get_proc(c"eglGetPlatformDisplayEXT".as_ptr());
-            if gpd.is_null() {
-                return Err(RenderError::Gl(
-                    "EGL has no eglGetPlatformDisplayEXT".into(),
-                ));
+        let mut attempts = Vec::new();
+        let mut chosen = None;
+        if client_ext.contains("EGL_MESA_platform_surfaceless") {
+            match open(EGL_PLATFORM_SURFACELESS_MESA, std::ptr::null_mut()) {
+                Some(d) => chosen = Some((d, "surfaceless")),
+                None => attempts.push(format!(
+                    "surfaceless platform failed (EGL error 0x{:x})",
+                    error_code(&egl)
+                )),
             }
-            let get_platform_display: FnGetPlatformDisplay = std::mem::transmute(gpd);
+        } else {
+            attempts.push("no EGL_MESA_platform_surfaceless".to_string());
+        }
+        if chosen.is_none() && client_ext.contains("EGL_EXT_platform_device") {
+            if let Some(qd) = egl.get_proc_address("eglQueryDevicesEXT") {
+                // SAFETY: eglGetProcAddress returned eglQueryDevicesEXT, whose C signature this is.
+                let query_devices: FnQueryDevices = unsafe { std::mem::transmute(qd) };
+                let mut devices = [std::ptr::null_mut(); 16];
+                let mut n = 0;
+                // SAFETY: room for 16 device handles, and the count, as the call is told.
+                if unsafe { query_devices(16, devices.as_mut_ptr(), &mut n) } != 0 {
+                    chosen = devices
+                        .iter()
+                        .take(n.max(0) as usize)
+                        .find_map(|&dev| open(EGL_PLATFORM_DEVICE_EXT, dev))
+                        .map(|d| (d, "device"));
+                }
+            }
+            if chosen.is_none() {
+                attempts.push("no usable EGL device".to_string());
+            }
+        }
+        let Some((display, platform)) = chosen else {
+            return Err(RenderError::Gl(attempts.join("; ")));
+        };
 
-            let mut attempts = Vec::new();
-            let mut chosen = None;
-            if client_ext.contains("EGL_MESA_platform_surfaceless") {
-                let d = get_platform_display(
-                    EGL_PLATFORM_SURFACELESS_MESA,
-                    std::ptr::null_mut(),
-                    std::ptr::null(),
-                );
-                let (mut maj, mut min) = (0, 0);
-                if !d.is_null() && initialize(d, &mut maj, &mut min) != 0 {
-                    chosen = Some((d, "surfaceless"));
-                } else {
-                    attempts.push(format!(
-                        "surfaceless platform failed (EGL error 0x{:x})",
-                        get_error()
-                    ));
-                }
-            } else {
-                attempts.push("no EGL_MESA_platform_surfaceless".to_string());
-            }
-            if chosen.is_none() && client_ext.contains("EGL_EXT_platform_device") {
-                let qd = get_proc(c"eglQueryDevicesEXT".as_ptr());
-                if !qd.is_null() {
-                    let query_devices: FnQueryDevices = std::mem::transmute(qd);
-                    let mut devices = [std::ptr::null_mut(); 16];
-                    let mut n = 0;
-                    if query_devices(16, devices.as_mut_ptr(), &mut n) != 0 {
-                        for dev in devices.iter().take(n.max(0) as usize) {
-                            let d = get_platform_display(
-                                EGL_PLATFORM_DEVICE_EXT,
-                                *dev,
-                                std::ptr::null(),
-                            );
-                            let (mut maj, mut min) = (0, 0);
-                            if !d.is_null() && initialize(d, &mut maj, &mut min) != 0 {
-                                chosen = Some((d, "device"));
-                                break;
-                            }
-                        }
-                    }
-                }
-                if chosen.is_none() {
-                    attempts.push("no usable EGL device".to_string());
-                }
-            }
-            let Some((display, platform)) = chosen else {
-                return Err(RenderError::Gl(attempts.join("; ")));
-            };
-
-            let attribs = [
-                EGL_SURFACE_TYPE,
-                EGL_PBUFFER_BIT,
-                EGL_RENDERABLE_TYPE,
-                EGL_OPENGL_BIT,
-                EGL_RED_SIZE,
-                8,
-                EGL_GREEN_SIZE,
-                8,
-                EGL_BLUE_SIZE,
-                8,
-                EGL_ALPHA_SIZE,
-                8,
-                EGL_DEPTH_SIZE,
-                24,
-                EGL_STENCIL_SIZE,
-                8,
-                EGL_NONE,
-            ];
-            let mut config: EglConfig = std::ptr::null_mut();
-            let mut n = 0;
-            if choose_config(display, attribs.as_ptr(), &mut config, 1, &mut n) == 0 || n < 1 {
-                return Err(RenderError::Gl("no EGL config with desktop OpenGL".into()));
-            }
-            if bind_api(EGL_OPENGL_API) == 0 {
-                return Err(RenderError::Gl("eglBindAPI(EGL_OPENGL_API) failed".into()));
-            }
-            // Default attributes: a compatibility-profile context, which MuJoCo 2.2.2 needs.
-            let context =
-                create_context(display, config, std::ptr::null_mut(), [EGL_NONE].as_ptr());
-            if context.is_null() {
-                let e = get_error();
-                return Err(RenderError::Gl(format!(
-                    "eglCreateContext failed (0x{e:x})"
-                )));
-            }
-            if make_current(display, std::ptr::null_mut(), std::ptr::null_mut(), context) == 0 {
-                let e = get_error();
-                destroy_context(display, context);
-                return Err(RenderError::Gl(format!(
-                    "eglMakeCurrent without a surface failed (0x{e:x})"
-                )));
-            }
-            let gs = get_proc(c"glGetString".as_ptr());
-            let info = if gs.is_null() {
-                GlInfo {
-                    vendor: cstr(query_string(display, EGL_VENDOR)),
-                    renderer: "unknown".into(),
-                    version: "unknown".into(),
-                    platform: platform.into(),
-                }
-            } else {
-                let get_string: FnGlGetString = std::mem::transmute(gs);
-                let s = |name| cstr(get_string(name) as *const c_char);
+        let attribs = [
+            egl::SURFACE_TYPE,
+            egl::PBUFFER_BIT,
+            egl::RENDERABLE_TYPE,
+            egl::OPENGL_BIT,
+            egl::RED_SIZE,
+            8,
+            egl::GREEN_SIZE,
+            8,
+            egl::BLUE_SIZE,
+            8,
+            egl::ALPHA_SIZE,
+            8,
+            egl::DEPTH_SIZE,
+            24,
+            egl::STENCIL_SIZE,
+            8,
+            egl::NONE,
+        ];
+        let Ok(Some(config)) = egl.choose_first_config(display, &attribs) else {
+            return Err(RenderError::Gl("no EGL config with desktop OpenGL".into()));
+        };
+        if egl.bind_api(egl::OPENGL_API).is_err() {
+            return Err(RenderError::Gl("eglBindAPI(EGL_OPENGL_API) failed".into()));
+        }
+        // Default attributes: a compatibility-profile context, which MuJoCo 2.2.2 needs.
+        let context = egl
+            .create_context(display, config, None, &[egl::NONE])
+            .map_err(|e| {
+                RenderError::Gl(format!("eglCreateContext failed (0x{:x})", e.native()))
+            })?;
+        if let Err(e) = egl.make_current(display, None, None, Some(context)) {
+            let _ = egl.destroy_context(display, context);
+            return Err(RenderError::Gl(format!(
+                "eglMakeCurrent without a surface failed (0x{:x})",
+                e.native()
+            )));
+        }
+        let info = match egl.get_proc_address("glGetString") {
+            None => GlInfo {
+                vendor: egl
+                    .query_string(Some(display), egl::VENDOR)
+                    .map(|s| s.to_string_lossy().into_owned())
+                    .unwrap_or_default(),
+                renderer: "unknown".into(),
+                version: "unknown".into(),
+                platform: platform.into(),
+            },
+            Some(gs) => {
+                // SAFETY: eglGetProcAddress returned glGetString, whose C signature this is; a GL
+                // context is current on this thread.
+                let get_string: FnGlGetString = unsafe { std::mem::transmute(gs) };
+                let s = |name| cstr(unsafe { get_string(name) } as *const c_char);
                 GlInfo {
                     vendor: s(GL_VENDOR),
                     renderer: s(GL_RENDERER),
                     version: s(GL_VERSION),
                     platform: platform.into(),
                 }
-            };
-            Ok(GlContext {
-                _lib: lib,
-                display,
-                context,
-                make_current,
-                destroy_context,
-                get_current_context,
-                info,
-            })
-        }
+            }
+        };
+        Ok(GlContext {
+            egl,
+            display,
+            context,
+            info,
+        })
     }
 
     fn make_current(&self) {
-        // SAFETY: display and context are valid until drop.
-        unsafe {
-            (self.make_current)(
-                self.display,
-                std::ptr::null_mut(),
-                std::ptr::null_mut(),
-                self.context,
-            );
-        }
+        let _ = self
+            .egl
+            .make_current(self.display, None, None, Some(self.context));
     }
 }
 
@@ -301,18 +257,11 @@ impl Drop for GlContext {
     fn drop(&mut self) {
         // The display is shared by every context of the process (EGL hands out one display per platform),
         // so it is never terminated here: that would break other live renderers.
-        // SAFETY: release our context if it is current on this thread, then destroy it.
-        unsafe {
-            if (self.get_current_context)() == self.context {
-                (self.make_current)(
-                    self.display,
-                    std::ptr::null_mut(),
-                    std::ptr::null_mut(),
-                    std::ptr::null_mut(),
-                );
-            }
-            (self.destroy_context)(self.display, self.context);
+        // Release our context if it is current on this thread, then destroy it.
+        if self.egl.get_current_context() == Some(self.context) {
+            let _ = self.egl.make_current(self.display, None, None, None);
         }
+        let _ = self.egl.destroy_context(self.display, self.context);
     }
 }
 
@@ -430,7 +379,7 @@ impl Renderer {
                 reason: "sides must be between 1 and 8192 pixels".into(),
             });
         }
-        crate::mujoco::init()?;
+        crate::engine::mujoco::init()?;
         let _gl_guard = gl_lock();
         let gl = GlContext::new()?;
         // A shallow copy of the model struct (arrays shared, read-only) with our offscreen size and MSAA:
@@ -821,5 +770,16 @@ mod tests {
         let b = [1, 2, 3, 4, 5, 6];
         assert_eq!(flip_rows(&b, 2, 3, 1), vec![5, 6, 3, 4, 1, 2]);
         assert_eq!(flip_rows(&b, 1, 2, 3), vec![4, 5, 6, 1, 2, 3]);
+    }
+
+    /// Without EGL, the error names the library and the packages that provide it.
+    #[test]
+    fn missing_egl_names_the_packages_to_install() {
+        let Err(e) = load_egl("libEGL-not-installed.so.1") else {
+            panic!("a missing library loaded");
+        };
+        let m = e.to_string();
+        assert!(m.contains("cannot open libEGL-not-installed.so.1"), "{m}");
+        assert!(m.contains("apt-get install libegl1 libegl-mesa0"), "{m}");
     }
 }

@@ -12,6 +12,8 @@
 use std::f64::consts::{FRAC_PI_2, PI};
 use std::fmt::Write;
 
+use crate::task::Category;
+
 /// Collision bits. Movable objects touch everything; a fixture's frame and its moving parts (drawers,
 /// knobs) touch objects and the robot but not each other (a fixture's frame is welded to the world, where
 /// MuJoCo's parent filter does not apply).
@@ -129,11 +131,76 @@ pub struct SiteDef {
     pub half: [f64; 3],
 }
 
+/// True geometry of an asset about its origin (not LIBERO's placement metadata): what placement
+/// rejects overlaps with and drops objects from.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Extent {
+    /// z of the geometry's lowest point, relative to the origin.
+    pub bottom: f64,
+    /// z of its highest point.
+    pub top: f64,
+    /// Radius of the footprint circle about the origin (movable objects).
+    pub radius: f64,
+    /// Footprint box `[x0, y0, x1, y1]` in the body frame, drawers closed and knob home (fixtures).
+    pub footprint: [f64; 4],
+}
+
+impl Extent {
+    /// What an asset without known geometry (one read from LIBERO's pack) is taken to be.
+    pub const GENERIC: Extent = Extent {
+        bottom: 0.0,
+        top: 0.1,
+        radius: 0.05,
+        footprint: [-0.05, -0.05, 0.05, 0.05],
+    };
+}
+
+/// What the scripted expert knows of an asset when it plans around and with it.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Handling {
+    /// Stands up from the table, so the hand's box (not only the fingers) can meet it.
+    pub tall: bool,
+    /// Lies flat (a plate): carried objects and fingers pass over it.
+    pub flat: bool,
+    /// Radius the fingers keep from it beside a grasp; `None` when they pass over it.
+    pub finger_clearance: Option<f64>,
+    /// Centre of that circle in the body frame (the stove's burner is off its origin).
+    pub clearance_centre: [f64; 3],
+    /// Radius a hand held with its finger axis along y keeps from it; `None` when not in the way.
+    pub hand_clearance: Option<f64>,
+    /// Radius kept around it when a plate is pushed past it.
+    pub push_clearance: f64,
+    /// Height of its origin above the table top while carried.
+    pub carry_height: f64,
+    /// Its bottom's height above the origin as the expert sets it on a region site.
+    pub site_bottom: f64,
+}
+
+impl Handling {
+    /// The expert's assumptions for an asset it has no facts for.
+    pub const GENERIC: Handling = Handling {
+        tall: false,
+        flat: false,
+        finger_clearance: Some(0.05),
+        clearance_centre: [0.0; 3],
+        hand_clearance: None,
+        push_clearance: 0.055,
+        carry_height: 0.115,
+        site_bottom: 0.0,
+    };
+}
+
 /// One asset of the library.
 #[derive(Debug, Clone, PartialEq)]
 pub struct AssetDef {
     /// BDDL category (`akita_black_bowl`, `wooden_cabinet`, …).
     pub category: &'static str,
+    /// The known category (`None` for one read from LIBERO's pack): what skills the expert uses.
+    pub builtin: Option<Category>,
+    /// True geometry.
+    pub extent: Extent,
+    /// The expert's facts.
+    pub handling: Handling,
     /// Movable or fixture.
     pub kind: AssetKind,
     /// LIBERO's `bottom_offset.z` (placement metadata, not the true geometry).
@@ -163,6 +230,18 @@ const DRAWER_REGION_HALF: [f64; 3] = [0.02993, 0.07561, 0.10224];
 static ASSETS: &[AssetDef] = &[
     AssetDef {
         category: "akita_black_bowl",
+        builtin: Some(Category::AkitaBlackBowl),
+        extent: Extent {
+            bottom: 0.0,
+            top: 0.052,
+            radius: 0.054,
+            ..Extent::GENERIC
+        },
+        handling: Handling {
+            finger_clearance: Some(0.055),
+            site_bottom: 0.002,
+            ..Handling::GENERIC
+        },
         kind: AssetKind::Movable,
         bottom_offset: -0.06,
         top_offset: 0.04,
@@ -173,6 +252,18 @@ static ASSETS: &[AssetDef] = &[
     },
     AssetDef {
         category: "plate",
+        builtin: Some(Category::Plate),
+        extent: Extent {
+            bottom: 0.0,
+            top: 0.0164,
+            radius: 0.069,
+            ..Extent::GENERIC
+        },
+        handling: Handling {
+            flat: true,
+            finger_clearance: None,
+            ..Handling::GENERIC
+        },
         kind: AssetKind::Movable,
         bottom_offset: -0.06,
         top_offset: 0.04,
@@ -183,6 +274,18 @@ static ASSETS: &[AssetDef] = &[
     },
     AssetDef {
         category: "basket",
+        builtin: Some(Category::Basket),
+        extent: Extent {
+            bottom: 0.0042,
+            top: 0.1457,
+            radius: 0.116,
+            ..Extent::GENERIC
+        },
+        handling: Handling {
+            tall: true,
+            finger_clearance: Some(0.09),
+            ..Handling::GENERIC
+        },
         kind: AssetKind::Movable,
         bottom_offset: -0.06,
         top_offset: 0.04,
@@ -196,6 +299,20 @@ static ASSETS: &[AssetDef] = &[
     },
     AssetDef {
         category: "cream_cheese",
+        builtin: Some(Category::CreamCheese),
+        extent: Extent {
+            bottom: -0.009,
+            top: 0.009,
+            radius: 0.046,
+            ..Extent::GENERIC
+        },
+        handling: Handling {
+            finger_clearance: Some(0.04),
+            push_clearance: 0.0215,
+            carry_height: 0.09,
+            site_bottom: -0.009,
+            ..Handling::GENERIC
+        },
         kind: AssetKind::Movable,
         bottom_offset: -0.025,
         top_offset: 0.025,
@@ -206,6 +323,20 @@ static ASSETS: &[AssetDef] = &[
     },
     AssetDef {
         category: "wine_bottle",
+        builtin: Some(Category::WineBottle),
+        extent: Extent {
+            bottom: 0.001,
+            top: 0.158,
+            radius: 0.022,
+            ..Extent::GENERIC
+        },
+        handling: Handling {
+            tall: true,
+            finger_clearance: Some(0.025),
+            carry_height: 0.10,
+            site_bottom: 0.001,
+            ..Handling::GENERIC
+        },
         kind: AssetKind::Movable,
         bottom_offset: -0.06,
         top_offset: 0.04,
@@ -216,6 +347,17 @@ static ASSETS: &[AssetDef] = &[
     },
     AssetDef {
         category: "wine_rack",
+        builtin: Some(Category::WineRack),
+        extent: Extent {
+            footprint: [-0.135, -0.127, 0.135, 0.127],
+            ..Extent::GENERIC
+        },
+        handling: Handling {
+            tall: true,
+            finger_clearance: Some(0.19),
+            hand_clearance: Some(0.19),
+            ..Handling::GENERIC
+        },
         kind: AssetKind::Fixture,
         bottom_offset: -0.06,
         top_offset: 0.04,
@@ -229,6 +371,17 @@ static ASSETS: &[AssetDef] = &[
     },
     AssetDef {
         category: "flat_stove",
+        builtin: Some(Category::FlatStove),
+        extent: Extent {
+            footprint: [-0.052, -0.095, 0.245, 0.095],
+            ..Extent::GENERIC
+        },
+        handling: Handling {
+            tall: true,
+            finger_clearance: Some(0.1),
+            clearance_centre: [0.1, 0.0, 0.0],
+            ..Handling::GENERIC
+        },
         kind: AssetKind::Fixture,
         bottom_offset: -0.045,
         top_offset: 0.045,
@@ -242,6 +395,20 @@ static ASSETS: &[AssetDef] = &[
     },
     AssetDef {
         category: "wooden_cabinet",
+        builtin: Some(Category::WoodenCabinet),
+        extent: Extent {
+            // Drawers may open by 0.16 m toward local −y, handles stick out 3 cm more.
+            footprint: [-0.128, -0.16, 0.128, 0.127],
+            ..Extent::GENERIC
+        },
+        handling: Handling {
+            tall: true,
+            // The carcass's front corners (plus handles) reach 0.17 m from its origin; the
+            // margin keeps a hand that then carries the bowl past a corner off it.
+            finger_clearance: Some(0.23),
+            hand_clearance: Some(0.17),
+            ..Handling::GENERIC
+        },
         kind: AssetKind::Fixture,
         bottom_offset: -0.045,
         top_offset: 0.045,
@@ -429,16 +596,18 @@ pub fn instance_xml(def: &AssetDef, instance: &str, pos: [f64; 3], quat: [f64; 4
         ),
     };
     out.push_str(&head);
-    match def.category {
-        "akita_black_bowl" => bowl(&mut out, p),
-        "plate" => plate(&mut out, p),
-        "basket" => basket(&mut out, p),
-        "cream_cheese" => cream_cheese(&mut out, p),
-        "wine_bottle" => wine_bottle(&mut out, p),
-        "wine_rack" => wine_rack(&mut out, p),
-        "flat_stove" => flat_stove(&mut out, p),
-        "wooden_cabinet" => wooden_cabinet(&mut out, p),
-        other => unreachable!("asset {other} listed without geometry"),
+    match def.builtin {
+        Some(Category::AkitaBlackBowl) => bowl(&mut out, p),
+        Some(Category::Plate) => plate(&mut out, p),
+        Some(Category::Basket) => basket(&mut out, p),
+        Some(Category::CreamCheese) => cream_cheese(&mut out, p),
+        Some(Category::WineBottle) => wine_bottle(&mut out, p),
+        Some(Category::WineRack) => wine_rack(&mut out, p),
+        Some(Category::FlatStove) => flat_stove(&mut out, p),
+        Some(Category::WoodenCabinet) => wooden_cabinet(&mut out, p),
+        Some(Category::WhiteCabinet) | None => {
+            unreachable!("asset {} listed without geometry", def.category)
+        }
     }
     out.push_str("</body>\n");
     out
@@ -796,7 +965,7 @@ pub const RIGHT_ANGLE: f64 = FRAC_PI_2;
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::mujoco::{Data, Model, ObjType};
+    use crate::engine::mujoco::{Data, Model, ObjType};
     use std::sync::Arc;
 
     fn world_with(def: &AssetDef, z: f64) -> String {

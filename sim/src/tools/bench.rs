@@ -3,10 +3,12 @@
 
 use std::time::Instant;
 
-use crate::env::{AGENTVIEW, EYE_IN_HAND, Env, EnvConfig, EnvError, SUBSTEPS, minimal_scene_xml};
-use crate::mujoco::{Data, Model, ffi, guard};
-use crate::render::{Channels, RenderQuality, Renderer};
-use crate::robot::{INIT_FINGERS, INIT_QPOS, PandaIds};
+use crate::engine::mujoco::{Data, Model, ffi, guard};
+use crate::engine::render::{Channels, RenderQuality, Renderer};
+use crate::world::env::{
+    AGENTVIEW, EYE_IN_HAND, Env, EnvConfig, EnvError, SUBSTEPS, minimal_scene_xml,
+};
+use crate::world::robot::{INIT_FINGERS, INIT_QPOS, PandaIds};
 
 /// One run of the benchmark.
 #[derive(Debug, Clone, serde::Serialize)]

@@ -2,8 +2,9 @@
 //! `under()` multiplies by R (not Rᵀ), `in_box()` uses |R·h| as the half-extent, `On(a, b)` between objects
 //! needs contact, b below a and xy distance < 3 cm, and so on.
 
-use crate::mujoco::Data;
-use crate::scene::{Scene, SceneRegion};
+use crate::engine::mujoco::Data;
+use crate::task::Predicate;
+use crate::world::scene::{Scene, SceneRegion};
 
 /// Errors from predicate evaluation.
 #[derive(Debug, thiserror::Error, PartialEq, Eq)]
@@ -22,6 +23,31 @@ pub enum PredicateError {
     /// A combination LIBERO cannot evaluate either (it raises).
     #[error("{0}")]
     Unsupported(String),
+}
+
+/// A predicate as [`Predicates::eval`] takes it: a parsed [`Predicate`] or its name (any case).
+pub trait PredicateRef {
+    /// The predicate, or [`PredicateError::Unknown`] for a name LIBERO does not register.
+    fn predicate(&self) -> Result<Predicate, PredicateError>;
+}
+
+impl PredicateRef for Predicate {
+    fn predicate(&self) -> Result<Predicate, PredicateError> {
+        Ok(*self)
+    }
+}
+
+impl PredicateRef for &Predicate {
+    fn predicate(&self) -> Result<Predicate, PredicateError> {
+        Ok(**self)
+    }
+}
+
+impl PredicateRef for &str {
+    fn predicate(&self) -> Result<Predicate, PredicateError> {
+        let name = self.to_ascii_lowercase();
+        Predicate::from_name(&name).ok_or(PredicateError::Unknown(name))
+    }
 }
 
 /// Default object height used by `under()`.
@@ -97,27 +123,31 @@ impl<'a> Predicates<'a> {
         (0..3).all(|k| lb[k] < p[k] && p[k] < ub[k])
     }
 
-    fn joints_of(&self, e: &Entity) -> Vec<(usize, usize, crate::assets::Articulation)> {
+    fn joints_of(&self, e: &Entity) -> Vec<(usize, usize, crate::world::assets::Articulation)> {
         match e {
             Entity::Instance(i) => self.scene.instances[*i].joints.clone(),
             Entity::Site(_, r) => r.joints.clone(),
         }
     }
 
-    /// Evaluates `(predicate args…)`; the predicate name is matched case-insensitively.
-    pub fn eval(&self, predicate: &str, args: &[String]) -> Result<bool, PredicateError> {
-        let p = predicate.to_ascii_lowercase();
+    /// Evaluates `(predicate args…)`; a predicate given by name is matched case-insensitively.
+    pub fn eval(
+        &self,
+        predicate: impl PredicateRef,
+        args: &[String],
+    ) -> Result<bool, PredicateError> {
+        let p = predicate.predicate()?;
         let arity = |n: usize| {
             if args.len() == n {
                 Ok(())
             } else {
-                Err(PredicateError::Arity(p.clone(), n, args.len()))
+                Err(PredicateError::Arity(p.name().to_string(), n, args.len()))
             }
         };
-        match p.as_str() {
-            "true" => Ok(true),
-            "false" => Ok(false),
-            "on" => {
+        match p {
+            Predicate::True => Ok(true),
+            Predicate::False => Ok(false),
+            Predicate::On => {
                 arity(2)?;
                 let a = self.entity(&args[0])?;
                 let Entity::Instance(ai) = a else {
@@ -139,7 +169,7 @@ impl<'a> Predicates<'a> {
                     }
                 }
             }
-            "in" => {
+            Predicate::In => {
                 arity(2)?;
                 let a = self.entity(&args[0])?;
                 let pa = self.pos(&a);
@@ -156,12 +186,12 @@ impl<'a> Predicates<'a> {
                     },
                 }
             }
-            "up" => {
+            Predicate::Up => {
                 arity(1)?;
                 let a = self.entity(&args[0])?;
                 Ok(self.pos(&a)[2] >= 1.0)
             }
-            "open" | "close" | "turnon" | "turnoff" => {
+            Predicate::Open | Predicate::Close | Predicate::TurnOn | Predicate::TurnOff => {
                 arity(1)?;
                 let e = self.entity(&args[0])?;
                 let joints = self.joints_of(&e);
@@ -172,14 +202,16 @@ impl<'a> Predicates<'a> {
                     )));
                 }
                 let q = self.data.qpos();
-                Ok(match p.as_str() {
-                    "open" => joints.iter().any(|&(_, a, art)| art.is_open(q[a])),
-                    "close" => joints.iter().all(|&(_, a, art)| art.is_close(q[a])),
-                    "turnon" => joints.iter().any(|&(_, a, art)| art.turn_on(q[a])),
-                    _ => joints.iter().all(|&(_, a, art)| art.turn_off(q[a])),
+                Ok(match p {
+                    Predicate::Open => joints.iter().any(|&(_, a, art)| art.is_open(q[a])),
+                    Predicate::Close => joints.iter().all(|&(_, a, art)| art.is_close(q[a])),
+                    Predicate::TurnOn => joints.iter().any(|&(_, a, art)| art.turn_on(q[a])),
+                    Predicate::TurnOff => joints.iter().all(|&(_, a, art)| art.turn_off(q[a])),
+                    other => unreachable!("{other} is not an articulation predicate"),
                 })
             }
-            _ => Err(PredicateError::Unknown(p.clone())),
+            // LIBERO registers it but its evaluator does not know it.
+            Predicate::PrintJointState => Err(PredicateError::Unknown(p.name().to_string())),
         }
     }
 }

@@ -1,0 +1,26 @@
+//! `sim info`: the MuJoCo version and the OpenGL renderer in use.
+
+use sim::env::minimal_scene_xml;
+use sim::mujoco::{self, Model};
+use sim::render::{RenderQuality, Renderer};
+
+/// Prints the MuJoCo version, the EGL platform and GL strings, and the minimal scene's sizes.
+pub fn run() -> anyhow::Result<()> {
+    mujoco::init()?;
+    println!("mujoco_version: {}", mujoco::version());
+    let model = Model::from_xml_str(&minimal_scene_xml())?;
+    let r = Renderer::new(&model, 64, 64, RenderQuality::default())?;
+    let gl = r.gl_info();
+    println!("egl_platform: {}", gl.platform);
+    println!("gl_vendor: {}", gl.vendor);
+    println!("gl_renderer: {}", gl.renderer);
+    println!("gl_version: {}", gl.version);
+    println!(
+        "scene: nq {} nv {} nu {} ngeom {}",
+        model.nq(),
+        model.nv(),
+        model.nu(),
+        model.ngeom()
+    );
+    Ok(())
+}

