@@ -97,9 +97,4 @@ impl DataError {
             _ => true,
         }
     }
-
-    /// Process exit code for this error ([`crate::exit`]): 2 for bad input, 1 otherwise.
-    pub fn exit_code(&self) -> i32 {
-        crate::exit::status(self.is_bad_input()) as i32
-    }
 }

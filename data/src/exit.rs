@@ -16,6 +16,13 @@ pub trait BadInput {
     fn is_bad_input(&self) -> bool;
 }
 
+impl crate::DataError {
+    /// Process exit code for this error: 2 for bad input, 1 otherwise.
+    pub fn exit_code(&self) -> i32 {
+        status(self.is_bad_input()) as i32
+    }
+}
+
 impl BadInput for crate::DataError {
     fn is_bad_input(&self) -> bool {
         crate::DataError::is_bad_input(self)

@@ -19,6 +19,7 @@
 
 #![warn(missing_docs)]
 
+pub mod error;
 pub mod policy;
 pub mod report;
 pub mod run;
@@ -32,74 +33,10 @@ use sim::record::Recorder;
 use sim::task::TaskSpec;
 use sim::{Env, EnvConfig, Observation};
 
+pub use error::EvalError;
 pub use policy::{ExpertPolicy, ModelPolicy, Policy, RandomPolicy, ZeroPolicy};
 pub use report::{EpisodeResult, Results, TaskSummary, summarize, wilson};
 pub use run::RunDir;
-
-/// Errors from evaluation.
-#[derive(Debug, thiserror::Error)]
-pub enum EvalError {
-    /// The simulator failed.
-    #[error(transparent)]
-    Env(#[from] sim::EnvError),
-    /// A task id could not be resolved.
-    #[error(transparent)]
-    Task(#[from] sim::task::TaskError),
-    /// Bad arguments.
-    #[error("{0}")]
-    Argument(String),
-    /// A run directory that cannot be evaluated (missing, no checkpoint, mismatched model).
-    #[error("{}: {message}", path.display())]
-    Run {
-        /// The offending file or directory.
-        path: PathBuf,
-        /// What is wrong.
-        message: String,
-    },
-    /// The model failed on an input.
-    #[error("model: {0}")]
-    Model(String),
-    /// A results file that cannot be read.
-    #[error("{}: {message}", path.display())]
-    Results {
-        /// The file.
-        path: PathBuf,
-        /// What is wrong.
-        message: String,
-    },
-    /// Writing an output file failed.
-    #[error(transparent)]
-    Data(#[from] data::DataError),
-    /// Writing a rollout recording or a visualisation failed.
-    #[error("{}: {message}", path.display())]
-    Output {
-        /// The file.
-        path: PathBuf,
-        /// What failed.
-        message: String,
-    },
-}
-
-impl EvalError {
-    /// Process exit status for this error ([`data::exit`]): 2 for bad input, 1 otherwise.
-    pub fn exit_code(&self) -> u8 {
-        data::exit::status(data::exit::BadInput::is_bad_input(self))
-    }
-}
-
-impl data::exit::BadInput for EvalError {
-    /// Arguments, tasks, run directories, results files, malformed data.
-    fn is_bad_input(&self) -> bool {
-        match self {
-            EvalError::Task(_)
-            | EvalError::Argument(_)
-            | EvalError::Run { .. }
-            | EvalError::Results { .. } => true,
-            EvalError::Data(d) => d.is_bad_input(),
-            _ => false,
-        }
-    }
-}
 
 /// How to run episodes.
 #[derive(Debug, Clone, PartialEq)]

@@ -2,14 +2,13 @@
 //! expert and the two floors (zero and random actions).
 
 use burn::prelude::Device;
-use data::GoalProgress;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use sim::expert::Expert;
 use sim::task::TaskSpec;
-use sim::{Env, GoalStatus, Observation};
+use sim::{Env, Observation};
 
-use crate::EvalError;
+use crate::error::EvalError;
 
 /// The action sent once a scripted policy has nothing left to do: stand still, gripper open.
 pub const IDLE_ACTION: [f32; 7] = [0.0, 0.0, 0.0, 0.0, 0.0, 0.0, -1.0];
@@ -135,16 +134,6 @@ impl ModelPolicy {
     }
 }
 
-/// The goal progress of an observation in the episode files' terms (what the recorder writes).
-pub fn goal_progress(g: &GoalStatus) -> GoalProgress {
-    GoalProgress {
-        satisfied: g.satisfied as u32,
-        total: g.goal_len as u32,
-        satisfied_subgoals: g.satisfied_texts.clone(),
-        current_subgoal: g.pending.clone().unwrap_or_default(),
-    }
-}
-
 /// Eval's input path: one simulator observation → the model's inputs, through `processor`.
 pub fn model_input(
     processor: &model::Processor,
@@ -164,7 +153,7 @@ pub fn model_input(
         channels: 3,
         data: obs.agentview_rgb.clone(),
     };
-    let goal = obs.goal.as_ref().map(goal_progress);
+    let goal = obs.goal.as_ref().map(sim::GoalStatus::progress);
     let step = model::StepObservation {
         agentview: &frame,
         state: obs.state,

@@ -6,7 +6,7 @@ use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
 
-use crate::EvalError;
+use crate::error::EvalError;
 
 /// The outcome of one rollout.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]

@@ -6,7 +6,7 @@ use std::path::Path;
 use burn::prelude::Device;
 pub use model::run::RunDir;
 
-use crate::EvalError;
+use crate::error::EvalError;
 use crate::policy::ModelPolicy;
 
 impl From<model::ModelError> for EvalError {

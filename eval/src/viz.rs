@@ -6,7 +6,7 @@ use std::path::{Path, PathBuf};
 
 use sim::Observation;
 
-use crate::EvalError;
+use crate::error::EvalError;
 use crate::policy::Policy;
 
 /// Distinct slot colours (RGB), cycled when there are more slots.
@@ -144,7 +144,7 @@ impl Writer {
             path: path.clone(),
             message: e.to_string(),
         })?;
-        crate::write_atomic(&path, &bytes)?;
+        data::fsio::write_atomic(&path, &bytes)?;
         self.written += 1;
         Ok(())
     }

@@ -1,7 +1,7 @@
 //! `sim`: the simulator's command line. Subcommands: info, tasks, assets (install, status, tasks),
 //! generate, sheet, render, expert-eval, aliasing, bench; each lives in its own file under `cli/`.
 //! All logic lives in the `sim` library; this parses, dispatches and maps errors to exit codes
-//! (2 for bad input, 1 for other failures).
+//! through the workspace's one contract, `data::exit` (2 for bad input, 1 for other failures).
 
 mod cli;
 
@@ -13,13 +13,6 @@ fn main() -> ExitCode {
     let cli = cli::Cli::parse();
     match cli::run(cli) {
         Ok(()) => ExitCode::SUCCESS,
-        Err(e) => {
-            eprintln!("error: {e:#}");
-            if e.downcast_ref::<cli::BadInput>().is_some() {
-                ExitCode::from(2)
-            } else {
-                ExitCode::FAILURE
-            }
-        }
+        Err(e) => data::exit::report::<cli::BadInput>(&e),
     }
 }

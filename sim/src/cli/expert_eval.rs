@@ -66,7 +66,6 @@ pub fn run(
     );
     println!("{header}\n{rule}");
     let t0 = std::time::Instant::now();
-    let next = std::sync::atomic::AtomicUsize::new(0);
     let results: std::sync::Mutex<Vec<Option<Vec<sim::expert::EpisodeResult>>>> =
         std::sync::Mutex::new(vec![None; tasks.len()]);
     let run_task = |spec: &sim::task::TaskSpec| -> anyhow::Result<Vec<sim::expert::EpisodeResult>> {
@@ -93,27 +92,18 @@ pub fn run(
         }
         Ok(out)
     };
-    std::thread::scope(|sc| -> anyhow::Result<()> {
-        let handles: Vec<_> = (0..workers.min(tasks.len()))
-            .map(|_| {
-                sc.spawn(|| -> anyhow::Result<()> {
-                    loop {
-                        let i = next.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
-                        let Some(spec) = tasks.get(i) else {
-                            return Ok(());
-                        };
-                        let r = run_task(spec)?;
-                        results.lock().expect("no panics while locked")[i] = Some(r);
-                    }
-                })
-            })
-            .collect();
-        for h in handles {
-            h.join().expect("worker panicked")?;
-        }
-        Ok(())
-    })?;
-    let results = results.into_inner().expect("no panics while locked");
+    data::pool::for_each(
+        tasks.len(),
+        workers,
+        || Ok(()),
+        |_, i| {
+            let r = run_task(&tasks[i])?;
+            results.lock().unwrap_or_else(|e| e.into_inner())[i] = Some(r);
+            Ok(())
+        },
+        || anyhow::anyhow!("an expert-eval worker panicked"),
+    )?;
+    let results = results.into_inner().unwrap_or_else(|e| e.into_inner());
     let mut rows = Vec::new();
     let (mut total_eps, mut total_steps) = (0usize, 0usize);
     for (spec, res) in tasks.iter().zip(results) {

@@ -215,6 +215,12 @@ impl std::fmt::Display for BadInput {
 
 impl std::error::Error for BadInput {}
 
+impl data::exit::BadInput for BadInput {
+    fn is_bad_input(&self) -> bool {
+        true
+    }
+}
+
 /// Bad input (unknown camera, bad size, unknown task or category, bad MJCF) → [`BadInput`].
 pub fn classify(e: EnvError) -> anyhow::Error {
     match e {

@@ -8,7 +8,6 @@
 
 use std::path::{Path, PathBuf};
 use std::sync::Mutex;
-use std::sync::atomic::{AtomicUsize, Ordering};
 
 use crate::collect::record::{RecordError, Recorder};
 use crate::expert::Expert;
@@ -159,66 +158,53 @@ pub fn generate(
     }
     std::fs::create_dir_all(dir).map_err(|e| data::DataError::io(dir, e))?;
     let progress = Mutex::new(GenerateProgress::default());
-    let next = AtomicUsize::new(0);
     let report = |f: &dyn Fn(&mut GenerateProgress)| {
-        let mut p = progress.lock().expect("no worker panicked");
+        let mut p = progress.lock().unwrap_or_else(|e| e.into_inner());
         f(&mut p);
         on_progress(*p);
     };
-    std::thread::scope(|s| -> Result<(), GenerateError> {
-        let workers: Vec<_> = (0..cfg.workers.min(cfg.episodes))
-            .map(|_| {
-                s.spawn(|| -> Result<(), GenerateError> {
-                    let mut env: Option<Env> = None;
-                    loop {
-                        let k = next.fetch_add(1, Ordering::SeqCst);
-                        if k >= cfg.episodes {
-                            return Ok(());
-                        }
-                        let path = episode_path(dir, k);
-                        if path.exists() {
-                            report(&|p| p.done += 1);
-                            continue;
-                        }
-                        if env.is_none() {
-                            env = Some(Env::from_task(
-                                task,
-                                EnvConfig {
-                                    image_size: cfg.image_size,
-                                    segmentation: true,
-                                    ..EnvConfig::default()
-                                },
-                            )?);
-                        }
-                        let env = env.as_mut().expect("just built");
-                        let mut ok = false;
-                        for attempt in 0..MAX_ATTEMPTS {
-                            let seed = attempt_seed(cfg.seed, k as u64, attempt);
-                            if record_episode(env, task, seed, &path, cfg.writer.clone())? {
-                                report(&|p| {
-                                    p.successes += 1;
-                                    p.done += 1;
-                                });
-                                ok = true;
-                                break;
-                            }
-                            report(&|p| p.failures += 1);
-                        }
-                        if !ok {
-                            return Err(GenerateError::Expert {
-                                task: task.id.clone(),
-                                episode: k,
-                            });
-                        }
-                    }
-                })
-            })
-            .collect();
-        for w in workers {
-            w.join().expect("worker panicked")?;
+    // Each worker builds its simulator only when it has an episode to record (finished episodes
+    // of an interrupted run are skipped).
+    let work = |env: &mut Option<Env>, k: usize| -> Result<(), GenerateError> {
+        let path = episode_path(dir, k);
+        if path.exists() {
+            report(&|p| p.done += 1);
+            return Ok(());
         }
-        Ok(())
-    })?;
+        if env.is_none() {
+            *env = Some(Env::from_task(
+                task,
+                EnvConfig {
+                    image_size: cfg.image_size,
+                    segmentation: true,
+                    ..EnvConfig::default()
+                },
+            )?);
+        }
+        let env = env.as_mut().expect("just built");
+        for attempt in 0..MAX_ATTEMPTS {
+            let seed = attempt_seed(cfg.seed, k as u64, attempt);
+            if record_episode(env, task, seed, &path, cfg.writer.clone())? {
+                report(&|p| {
+                    p.successes += 1;
+                    p.done += 1;
+                });
+                return Ok(());
+            }
+            report(&|p| p.failures += 1);
+        }
+        Err(GenerateError::Expert {
+            task: task.id.clone(),
+            episode: k,
+        })
+    };
+    data::pool::for_each(
+        cfg.episodes,
+        cfg.workers,
+        || Ok(None),
+        work,
+        || GenerateError::Argument("a generation worker panicked".into()),
+    )?;
     let index = data::build_index(
         dir,
         &data::IndexOptions {

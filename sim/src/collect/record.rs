@@ -9,8 +9,8 @@
 use std::path::{Path, PathBuf};
 
 use data::{
-    DepthImage, EpisodeMeta, EpisodeWriter, GoalProgress, Image, ObjectAnnotation, RgbImage,
-    Segmentation, StepRecord, WriterOptions,
+    DepthImage, EpisodeMeta, EpisodeWriter, Image, ObjectAnnotation, RgbImage, Segmentation,
+    StepRecord, WriterOptions,
 };
 
 use crate::engine::mujoco::ObjType;
@@ -203,12 +203,7 @@ impl Recorder {
             joint_state: obs.joint_state,
             action,
             objects,
-            progress: GoalProgress {
-                satisfied: goal.satisfied as u32,
-                total: goal.goal_len as u32,
-                satisfied_subgoals: goal.satisfied_texts.clone(),
-                current_subgoal: goal.pending.clone().unwrap_or_default(),
-            },
+            progress: goal.progress(),
         };
         self.writer.write_step(&record)?;
         self.step += 1;

@@ -166,6 +166,17 @@ pub struct GoalStatus {
 }
 
 impl GoalStatus {
+    /// The progress in the episode files' terms: what the recorder writes and what a policy's
+    /// input processor reads at evaluation.
+    pub fn progress(&self) -> data::GoalProgress {
+        data::GoalProgress {
+            satisfied: self.satisfied as u32,
+            total: self.goal_len as u32,
+            satisfied_subgoals: self.satisfied_texts.clone(),
+            current_subgoal: self.pending.clone().unwrap_or_default(),
+        }
+    }
+
     /// Tiered credit, satisfied / goal length.
     pub fn tiered(&self) -> f64 {
         self.satisfied as f64 / self.goal_len.max(1) as f64

@@ -1,5 +1,6 @@
-//! The library's layering, checked on its source: no file-level import cycle inside `sim/src`, and
-//! nothing under `src/task/` reaches the engine, the world or the pack (directly or through others).
+//! The workspace's layering, checked on its source: no file-level import cycle inside any crate's
+//! library (`data`, `model`, `train`, `eval`, `sim`), and nothing under `sim/src/task/` reaches the
+//! engine, the world or the pack (directly or through others).
 //!
 //! Every path a file names is collected — `use` trees (grouped `{a::b, c}`, `self`, `as`, globs),
 //! and paths written inline in code (`crate::x::y`, `super::super::z`, `child_module::item`) — and
@@ -7,7 +8,7 @@
 //! `crate::mujoco::Data`, re-exported from `engine::mujoco`, lands on `engine/mujoco/mod.rs`). Comments
 //! and string literals are skipped. `#[cfg(test)]` modules are left out: nothing imports a test
 //! module, so it cannot sit on a cycle of the library, and unit tests may drive the whole stack.
-//! The binary (`main.rs` and `cli/`) is another crate, reaching the library only through `sim::`.
+//! A binary (`main.rs`, `cli/`, `bin/`) is another crate, reaching its library only by name.
 
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::{Path, PathBuf};
@@ -29,8 +30,14 @@ struct File {
     globs: Vec<ModPath>,
 }
 
-fn src_dir() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("src")
+/// The crates whose libraries are checked.
+const CRATES: [&str; 5] = ["data", "model", "train", "eval", "sim"];
+
+fn src_dir(krate: &str) -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("..")
+        .join(krate)
+        .join("src")
 }
 
 fn rs_files(dir: &Path, out: &mut Vec<PathBuf>) {
@@ -388,8 +395,8 @@ struct Graph {
     edges: Vec<BTreeMap<usize, String>>,
 }
 
-fn graph() -> Graph {
-    let src = src_dir();
+fn graph(krate: &str) -> Graph {
+    let src = src_dir(krate);
     let mut paths = Vec::new();
     rs_files(&src, &mut paths);
     paths.sort();
@@ -498,38 +505,44 @@ fn route(g: &Graph, from: usize, to: usize) -> Vec<String> {
 }
 
 #[test]
-fn no_file_level_import_cycle() {
-    let g = graph();
-    assert!(g.files.len() > 20, "found only {} files", g.files.len());
-    let reach: Vec<BTreeSet<usize>> = (0..g.files.len()).map(|k| reachable(&g, k)).collect();
+fn no_file_level_import_cycle_in_any_crate() {
     let mut cycles = Vec::new();
-    let mut reported = BTreeSet::new();
-    for k in 0..g.files.len() {
-        if !reach[k].contains(&k) || reported.contains(&k) {
-            continue;
+    for krate in CRATES {
+        let g = graph(krate);
+        assert!(
+            g.files.len() >= 4,
+            "{krate}: found only {} files",
+            g.files.len()
+        );
+        let reach: Vec<BTreeSet<usize>> = (0..g.files.len()).map(|k| reachable(&g, k)).collect();
+        let mut reported = BTreeSet::new();
+        for k in 0..g.files.len() {
+            if !reach[k].contains(&k) || reported.contains(&k) {
+                continue;
+            }
+            // k's strongly connected component: the files on some cycle with it.
+            let component: Vec<usize> = (0..g.files.len())
+                .filter(|&j| reach[k].contains(&j) && reach[j].contains(&k))
+                .collect();
+            reported.extend(component.iter().copied());
+            let names: Vec<&str> = component.iter().map(|&j| g.files[j].rel.as_str()).collect();
+            cycles.push(format!(
+                "{krate}: cycle among [{}], e.g.\n  {}",
+                names.join(", "),
+                route(&g, k, k).join("\n  ")
+            ));
         }
-        // k's strongly connected component: the files on some cycle with it.
-        let component: Vec<usize> = (0..g.files.len())
-            .filter(|&j| reach[k].contains(&j) && reach[j].contains(&k))
-            .collect();
-        reported.extend(component.iter().copied());
-        let names: Vec<&str> = component.iter().map(|&j| g.files[j].rel.as_str()).collect();
-        cycles.push(format!(
-            "cycle among [{}], e.g.\n  {}",
-            names.join(", "),
-            route(&g, k, k).join("\n  ")
-        ));
     }
     assert!(
         cycles.is_empty(),
-        "file-level import cycles in sim/src:\n{}",
+        "file-level import cycles:\n{}",
         cycles.join("\n")
     );
 }
 
 #[test]
 fn task_reaches_no_engine_world_or_pack() {
-    let g = graph();
+    let g = graph("sim");
     let forbidden = |rel: &str| {
         ["engine/", "world/", "pack/"]
             .iter()
@@ -614,13 +627,13 @@ mod tests { use crate::only_tests::T; }
     );
 }
 
-/// `LAYERS_PRINT=1 cargo test -p sim --test layers -- --nocapture` prints the file graph.
+/// `LAYERS_PRINT=sim cargo test -p e2e --test layers -- --nocapture` prints a crate's file graph.
 #[test]
 fn print_graph_when_asked() {
-    if std::env::var_os("LAYERS_PRINT").is_none() {
+    let Some(krate) = std::env::var_os("LAYERS_PRINT") else {
         return;
-    }
-    let g = graph();
+    };
+    let g = graph(&krate.to_string_lossy());
     for (k, f) in g.files.iter().enumerate() {
         let to: Vec<&str> = g.edges[k]
             .keys()
