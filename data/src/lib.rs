@@ -35,6 +35,7 @@
 #![warn(missing_docs)]
 
 pub mod bench;
+pub mod draw;
 pub mod episode;
 pub mod error;
 pub mod example;

@@ -357,42 +357,7 @@ pub fn evaluate(
 /// Resolves `--tasks` (comma-separated ids, or the suites `libero_mem`, `libero_goal`, `all`);
 /// `repeat` sets the repetition count of the repetition family (t1–t6).
 pub fn resolve_tasks(spec: &str, repeat: Option<usize>) -> Result<Vec<TaskSpec>, EvalError> {
-    let mut out = Vec::new();
-    let mut push = |t: TaskSpec| -> Result<(), EvalError> {
-        out.push(match repeat {
-            Some(n) => sim::task::resolve_with_repeats(&t.id, n)?,
-            None => t,
-        });
-        Ok(())
-    };
-    for part in spec.split(',').map(str::trim).filter(|s| !s.is_empty()) {
-        match part {
-            "all" => {
-                for t in sim::task::list() {
-                    push(t)?;
-                }
-            }
-            "libero_spatial" | "libero_object" | "libero_10" | "libero_90" => {
-                let pack = sim::pack::LiberoPack::locate_default()
-                    .map_err(|e| EvalError::Argument(e.to_string()))?;
-                for t in sim::pack::libero_tasks(&pack)?
-                    .into_iter()
-                    .filter(|t| t.suite == part)
-                {
-                    push(sim::task::resolve(&t.id)?)?;
-                }
-            }
-            "libero_mem" | "libero_goal" => {
-                for t in sim::task::list()
-                    .into_iter()
-                    .filter(|t| t.id.starts_with(&format!("{part}/")))
-                {
-                    push(t)?;
-                }
-            }
-            id => push(sim::task::resolve(id)?)?,
-        }
-    }
+    let out = sim::pack::resolve_suites(spec, repeat)?;
     if out.is_empty() {
         return Err(EvalError::Argument("no tasks given".into()));
     }

@@ -1,5 +1,5 @@
-//! Loss curves as PNG, drawn by a small rasteriser into `image` (lines, axes and 8×8 bitmap
-//! labels): one file per loss term, training in blue (raw, light; moving average, dark) and
+//! Loss curves as PNG, drawn by a small rasteriser into `image` (lines, axes, and labels through
+//! the workspace's one text routine, `data::draw`): one file per loss term, training in blue (raw, light; moving average, dark) and
 //! validation as red dots.
 
 use std::path::Path;
@@ -43,17 +43,7 @@ fn line(img: &mut RgbImage, (x0, y0): (i64, i64), (x1, y1): (i64, i64), c: Rgb<u
 }
 
 fn text(img: &mut RgbImage, x: i64, y: i64, s: &str, c: Rgb<u8>) {
-    use font8x8::UnicodeFonts;
-    for (i, ch) in s.chars().enumerate() {
-        let glyph = font8x8::BASIC_FONTS.get(ch).unwrap_or([0; 8]);
-        for (row, bits) in glyph.iter().enumerate() {
-            for col in 0..8 {
-                if bits >> col & 1 == 1 {
-                    put(img, x + i as i64 * 8 + col, y + row as i64, c);
-                }
-            }
-        }
-    }
+    data::draw::text(img, x, y, s, c.0, 8);
 }
 
 fn fmt(v: f64) -> String {

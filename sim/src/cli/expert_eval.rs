@@ -27,26 +27,20 @@ pub fn run(
     if let Some(md) = &markdown {
         check_out_dir(md)?;
     }
-    let mut tasks = Vec::new();
-    for t in task.split(',') {
-        match t {
-            "all" => tasks.extend(sim::task::list()),
-            "mem" | "goal" => tasks.extend(sim::task::list().into_iter().filter(|s| {
-                s.id.starts_with(if t == "mem" {
-                    "libero_mem"
-                } else {
-                    "libero_goal"
-                })
-            })),
-            id => {
-                let spec = match repeat {
-                    Some(n) => sim::task::resolve_with_repeats(id, n),
-                    None => sim::task::resolve(id),
-                }
-                .map_err(|e| BadInput(e.to_string()))?;
-                tasks.push(spec);
-            }
-        }
+    // eval's suite names (`libero_mem`, `libero_goal`, `all`, the pack's suites, task ids);
+    // `mem` and `goal` stay as the old short forms.
+    let spec: Vec<&str> = task
+        .split(',')
+        .map(|t| match t.trim() {
+            "mem" => "libero_mem",
+            "goal" => "libero_goal",
+            other => other,
+        })
+        .collect();
+    let tasks =
+        sim::pack::resolve_suites(&spec.join(","), repeat).map_err(|e| BadInput(e.to_string()))?;
+    if tasks.is_empty() {
+        return Err(BadInput("no tasks given".into()).into());
     }
     let cfg = sim::expert::ExpertConfig::default();
     let header = format!(

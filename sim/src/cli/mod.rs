@@ -136,7 +136,9 @@ pub enum Command {
     },
     /// Run the scripted expert (rendering off) and print per-task success and episode lengths.
     ExpertEval {
-        /// `all`, `mem`, `goal`, or a task id (`t3`, `t3@12`, `libero_goal/<name>`); comma-separated.
+        /// Tasks as `eval --tasks` takes them: `libero_mem`, `libero_goal`, `all`, the LIBERO pack's suites
+        /// (`libero_spatial`, …) or task ids (`t3`, `t3@12`, `libero_goal/<name>`), comma-separated;
+        /// `mem` and `goal` are short for the first two.
         #[arg(long, default_value = "all")]
         task: String,
         /// Episodes per task (seeds seed, seed+1, …).

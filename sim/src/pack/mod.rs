@@ -90,6 +90,53 @@ pub struct LiberoTask {
     pub problem: crate::task::Problem,
 }
 
+/// The tasks of a comma-separated list of task ids and suites — `libero_mem`, `libero_goal`,
+/// `all` (the shipped tasks) and, with LIBERO's pack installed, `libero_spatial`,
+/// `libero_object`, `libero_10`, `libero_90` — with `repeat` repetitions for the repetition
+/// family (t1–t6). The one suite vocabulary of `eval` and `sim expert-eval`.
+pub fn resolve_suites(
+    spec: &str,
+    repeat: Option<usize>,
+) -> Result<Vec<crate::task::TaskSpec>, crate::task::TaskError> {
+    use crate::task::{self, TaskSpec};
+    let mut out = Vec::new();
+    let mut push = |t: TaskSpec| -> Result<(), task::TaskError> {
+        out.push(match repeat {
+            Some(n) => task::resolve_with_repeats(&t.id, n)?,
+            None => t,
+        });
+        Ok(())
+    };
+    for part in spec.split(',').map(str::trim).filter(|s| !s.is_empty()) {
+        match part {
+            "all" => {
+                for t in task::list() {
+                    push(t)?;
+                }
+            }
+            "libero_spatial" | "libero_object" | "libero_10" | "libero_90" => {
+                let pack = LiberoPack::locate_default().map_err(|e| task::TaskError::Pack {
+                    id: part.to_string(),
+                    message: e.to_string(),
+                })?;
+                for t in libero_tasks(&pack)?.into_iter().filter(|t| t.suite == part) {
+                    push(task::resolve(&t.id)?)?;
+                }
+            }
+            "libero_mem" | "libero_goal" => {
+                for t in task::list()
+                    .into_iter()
+                    .filter(|t| t.id.starts_with(&format!("{part}/")))
+                {
+                    push(t)?;
+                }
+            }
+            id => push(task::resolve(id)?)?,
+        }
+    }
+    Ok(out)
+}
+
 /// Every task of the pack's five suites, suites in benchmark order, tasks by file name; a BDDL file
 /// that does not parse is an error naming it.
 pub fn libero_tasks(pack: &LiberoPack) -> Result<Vec<LiberoTask>, crate::task::TaskError> {

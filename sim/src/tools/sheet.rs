@@ -1,6 +1,5 @@
 //! Contact sheets: labelled tiles of rendered frames in one PNG (`docs/tasks.png`).
 
-use font8x8::UnicodeFonts;
 use image::{Rgb, RgbImage};
 
 use crate::engine::render::Frame;
@@ -40,27 +39,10 @@ pub fn contact_sheet(tiles: &[(String, Frame)], cols: usize) -> Option<RgbImage>
     Some(img)
 }
 
-/// Draws `text` in black at (x, y), clipped to `max_w` pixels.
+/// Draws `text` in black at (x, y), cut to the glyphs that fit in `max_w` pixels.
 fn draw_text(img: &mut RgbImage, x: u32, y: u32, text: &str, max_w: u32) {
-    for (i, ch) in text.chars().enumerate() {
-        let ox = x + 7 * i as u32;
-        if ox + 8 > x + max_w {
-            break;
-        }
-        let Some(glyph) = font8x8::BASIC_FONTS.get(ch) else {
-            continue;
-        };
-        for (row, bits) in glyph.iter().enumerate() {
-            for col in 0..8u32 {
-                if bits & (1 << col) != 0 {
-                    let (px, py) = (ox + col, y + row as u32);
-                    if px < img.width() && py < img.height() {
-                        img.put_pixel(px, py, Rgb([0, 0, 0]));
-                    }
-                }
-            }
-        }
-    }
+    let shown = data::draw::fitting(text, max_w, 7);
+    data::draw::text(img, x as i64, y as i64, shown, [0, 0, 0], 7);
 }
 
 #[cfg(test)]
