@@ -399,6 +399,8 @@ pub fn parse_reasoning(text: &str, width: u32, height: u32) -> Option<Vec<Object
             bbox,
             visible: bbox[2] > 0.0 && bbox[3] > 0.0,
             subgoal_label: if label.is_empty() { "0".into() } else { label },
+            pose: None,
+            grasped: None,
         });
     }
     Some(out)

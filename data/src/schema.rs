@@ -5,8 +5,11 @@ use std::collections::BTreeMap;
 
 use serde::{Deserialize, Serialize};
 
-/// Version tag stored in every episode's metadata; readers refuse other versions.
-pub const SCHEMA_VERSION: &str = "libero-mem-rs/episode/1";
+/// Version tag stored in every episode's metadata (version 2 adds object poses and grasp flags
+/// to the object annotations).
+pub const SCHEMA_VERSION: &str = "libero-mem-rs/episode/2";
+/// Versions this reader understands; files of version 1 read with no object poses.
+pub const READABLE_VERSIONS: [&str; 2] = ["libero-mem-rs/episode/1", SCHEMA_VERSION];
 /// Name of the mcap metadata record holding [`EpisodeMeta`].
 pub const METADATA_NAME: &str = "episode";
 
@@ -124,6 +127,13 @@ pub struct ObjectAnnotation {
     pub visible: bool,
     /// The object's subgoal label (`"0"` before any subgoal touched it, as LIBERO-Mem).
     pub subgoal_label: String,
+    /// Privileged pose in the world frame: position (m) and orientation quaternion (w, x, y, z)
+    /// of the object's root body (schema 2; absent in version-1 files and imported data).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub pose: Option<[f32; 7]>,
+    /// Whether both gripper fingers touch the object at this step (schema 2).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub grasped: Option<bool>,
 }
 
 /// Goal progress at one step.
@@ -230,9 +240,10 @@ impl EpisodeMeta {
                 .ok_or_else(|| format!("metadata key `{k}` missing"))
         };
         let version = get("schema_version")?;
-        if version != SCHEMA_VERSION {
+        if !READABLE_VERSIONS.contains(&version.as_str()) {
             return Err(format!(
-                "schema_version is `{version}`, this reader understands `{SCHEMA_VERSION}`"
+                "schema_version is `{version}`, this reader understands {}",
+                READABLE_VERSIONS.map(|v| format!("`{v}`")).join(" and ")
             ));
         }
         let seed = get("seed")?
@@ -326,7 +337,7 @@ pub fn json_schema(name: &str) -> Option<&'static str> {
             r#"{"$schema":"https://json-schema.org/draft/2020-12/schema","title":"lmr.Action","description":"Action: delta position (3), delta axis-angle (3), gripper (-1 open, +1 close)","type":"object","properties":{"step":{"type":"integer"},"action":{"type":"array","items":{"type":"number"},"minItems":7,"maxItems":7}},"required":["step","action"]}"#
         }
         SCHEMA_OBJECTS => {
-            r#"{"$schema":"https://json-schema.org/draft/2020-12/schema","title":"lmr.ObjectAnnotations","type":"object","properties":{"step":{"type":"integer"},"objects":{"type":"array","items":{"type":"object","properties":{"instance_id":{"type":"integer"},"name":{"type":"string"},"box":{"description":"x, y, w, h normalised to [0,1] in the upright agentview image","type":"array","items":{"type":"number"},"minItems":4,"maxItems":4},"visible":{"type":"boolean"},"subgoal_label":{"type":"string"}},"required":["instance_id","name","box","visible","subgoal_label"]}}},"required":["step","objects"]}"#
+            r#"{"$schema":"https://json-schema.org/draft/2020-12/schema","title":"lmr.ObjectAnnotations","type":"object","properties":{"step":{"type":"integer"},"objects":{"type":"array","items":{"type":"object","properties":{"instance_id":{"type":"integer"},"name":{"type":"string"},"box":{"description":"x, y, w, h normalised to [0,1] in the upright agentview image","type":"array","items":{"type":"number"},"minItems":4,"maxItems":4},"visible":{"type":"boolean"},"subgoal_label":{"type":"string"},"pose":{"description":"world position (m) and quaternion w, x, y, z of the object's root body","type":"array","items":{"type":"number"},"minItems":7,"maxItems":7},"grasped":{"description":"both gripper fingers touch the object","type":"boolean"}},"required":["instance_id","name","box","visible","subgoal_label"]}}},"required":["step","objects"]}"#
         }
         SCHEMA_GOAL => {
             r#"{"$schema":"https://json-schema.org/draft/2020-12/schema","title":"lmr.GoalProgress","type":"object","properties":{"step":{"type":"integer"},"satisfied":{"type":"integer"},"total":{"type":"integer"},"satisfied_subgoals":{"type":"array","items":{"type":"string"}},"current_subgoal":{"type":"string"}},"required":["step","satisfied","total","satisfied_subgoals","current_subgoal"]}"#

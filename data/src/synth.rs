@@ -130,6 +130,8 @@ pub fn synthetic_steps(len: usize, seed: u64, o: &SynthOptions) -> Vec<StepRecor
                         } else {
                             "0".into()
                         },
+                        pose: Some([0.1, 0.01 * k as f32, 0.9, 1.0, 0.0, 0.0, 0.0]),
+                        grasped: Some(k % 5 == 2),
                     },
                     ObjectAnnotation {
                         instance_id: 20,
@@ -137,6 +139,8 @@ pub fn synthetic_steps(len: usize, seed: u64, o: &SynthOptions) -> Vec<StepRecor
                         bbox: [0.5, 0.5, 0.5, 0.5],
                         visible: k % 7 != 3,
                         subgoal_label: "0".into(),
+                        pose: None,
+                        grasped: None,
                     },
                 ],
                 progress: GoalProgress {

@@ -298,3 +298,36 @@ fn same_steps_give_identical_files() {
     assert!(a == b, "episode files differ for identical input");
     assert_eq!(synthetic_steps(12, 11, &SynthOptions::default()), steps);
 }
+
+/// Schema 2 added object poses and grasp flags; version-1 metadata and annotations without them
+/// still read, other versions are refused naming both readable ones.
+#[test]
+fn schema_version_1_still_reads_and_others_are_refused() {
+    let mut m = EpisodeMeta::default().to_map();
+    assert_eq!(m["schema_version"], "libero-mem-rs/episode/2");
+    m.insert("schema_version".into(), "libero-mem-rs/episode/1".into());
+    assert!(EpisodeMeta::from_map(&m).is_ok());
+    m.insert("schema_version".into(), "libero-mem-rs/episode/3".into());
+    let e = EpisodeMeta::from_map(&m).unwrap_err();
+    assert!(
+        e.contains("episode/3") && e.contains("episode/1") && e.contains("episode/2"),
+        "{e}"
+    );
+    let v1: ObjectAnnotation = serde_json::from_str(
+        r#"{"instance_id":1,"name":"bowl","box":[0,0,0.5,0.5],"visible":true,"subgoal_label":"0"}"#,
+    )
+    .unwrap();
+    assert_eq!((v1.pose, v1.grasped), (None, None));
+    let v2 = ObjectAnnotation {
+        pose: Some([0.1, 0.2, 0.9, 1.0, 0.0, 0.0, 0.0]),
+        grasped: Some(true),
+        ..v1.clone()
+    };
+    let back: ObjectAnnotation =
+        serde_json::from_str(&serde_json::to_string(&v2).unwrap()).unwrap();
+    assert_eq!(back, v2);
+    assert!(
+        !serde_json::to_string(&v1).unwrap().contains("pose"),
+        "absent fields are not written"
+    );
+}

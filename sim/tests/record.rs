@@ -67,6 +67,63 @@ fn a_rollout_round_trips_through_mcap() {
     assert_eq!(bowl.subgoal_label, "0");
     assert_eq!(step.progress.total, 1);
     assert_eq!(step.progress.current_subgoal, "bowl 1 on plate 1");
+    // Schema 2: every instance's privileged pose at the step's observation, unit quaternion.
+    for o in &step.objects {
+        let p = o.pose.expect("pose recorded");
+        let norm: f32 = p[3..].iter().map(|v| v * v).sum::<f32>().sqrt();
+        assert!((norm - 1.0).abs() < 1e-4, "{}: {p:?}", o.name);
+        assert!(p[2] > 0.5 && p[2] < 1.5, "{}: z {}", o.name, p[2]);
+        assert_eq!(o.grasped, Some(false), "{}", o.name);
+    }
+}
+
+/// The expert's T1 demonstration: the recorded poses follow the simulator's state at each
+/// observation, and the bowl is flagged as grasped while it is carried, and only then.
+#[test]
+fn recorded_poses_track_the_objects_and_the_grasp() {
+    let task = registry::resolve("t1").unwrap();
+    let cfg = EnvConfig {
+        image_size: 32,
+        segmentation: true,
+        ..EnvConfig::default()
+    };
+    let mut env = Env::from_task(&task, cfg).unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("ep.mcap");
+    assert!(
+        sim::generate::record_episode(&mut env, &task, 0, &path, Default::default()).unwrap(),
+        "the expert solves T1 seed 0"
+    );
+    let reader = data::EpisodeReader::open(&path).unwrap();
+    let steps: Vec<data::StepRecord> = (0..reader.len())
+        .map(|k| reader.read_step(k).unwrap())
+        .collect();
+    // Replay the actions: each step's recorded poses are the state of its observation.
+    let mut obs = env.reset(0).unwrap();
+    for (k, st) in steps.iter().enumerate() {
+        for (o, s) in st.objects.iter().zip(&obs.objects) {
+            assert_eq!(o.pose, Some(s.pose()), "step {k} {}", o.name);
+            assert_eq!(o.grasped, Some(s.grasped), "step {k} {}", o.name);
+        }
+        obs = env.step(&st.action).unwrap();
+    }
+    let bowl = |st: &data::StepRecord| st.objects[0].clone();
+    let held: Vec<usize> = (0..steps.len())
+        .filter(|&k| bowl(&steps[k]).grasped == Some(true))
+        .collect();
+    assert!(held.len() > 10, "the bowl is held for {} steps", held.len());
+    let lifted = held
+        .iter()
+        .any(|&k| bowl(&steps[k]).pose.unwrap()[2] > bowl(&steps[0]).pose.unwrap()[2] + 0.03);
+    assert!(lifted, "the bowl rises while it is held");
+    assert_eq!(bowl(&steps[0]).grasped, Some(false));
+    assert!(
+        steps
+            .iter()
+            .flat_map(|s| &s.objects[1..])
+            .all(|o| o.grasped == Some(false)),
+        "only the bowl is grasped"
+    );
 }
 
 #[test]

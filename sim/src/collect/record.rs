@@ -182,7 +182,11 @@ impl Recorder {
                 }
             })
             .collect();
-        let objects = annotations(scene, &ids, s as usize, &self.labels);
+        let mut objects = annotations(scene, &ids, s as usize, &self.labels);
+        for (o, st) in objects.iter_mut().zip(&obs.objects) {
+            o.pose = Some(st.pose());
+            o.grasped = Some(st.grasped);
+        }
         let record = StepRecord {
             step: self.step,
             agentview: rgb(&obs.agentview_rgb)?,
@@ -263,6 +267,8 @@ fn annotations(
             },
             visible: seen[k],
             subgoal_label: labels[k].clone(),
+            pose: None,
+            grasped: None,
         })
         .collect()
 }

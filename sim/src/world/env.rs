@@ -124,6 +124,29 @@ pub struct Observation {
     pub eef_quat: [f64; 4],
     /// Goal progress (task environments).
     pub goal: Option<GoalStatus>,
+    /// Privileged state of every scene instance, in the scene's instance order (task
+    /// environments; empty for the minimal scene).
+    pub objects: Vec<ObjectState>,
+}
+
+/// The simulator's privileged state of one scene instance (object or fixture) at an observation.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ObjectState {
+    /// Position of the instance's root body, world frame (m).
+    pub pos: [f64; 3],
+    /// Orientation of the root body, quaternion (w, x, y, z).
+    pub quat: [f64; 4],
+    /// Both gripper fingers touch one of the instance's geoms.
+    pub grasped: bool,
+}
+
+impl ObjectState {
+    /// Position and quaternion as 7 floats (the episode files' `pose`).
+    pub fn pose(&self) -> [f32; 7] {
+        let [x, y, z] = self.pos;
+        let [w, a, b, c] = self.quat;
+        [x, y, z, w, a, b, c].map(|v| v as f32)
+    }
 }
 
 /// Builds the MJCF of the minimal scene: LIBERO's tabletop arena, cameras, the Panda, one box.
@@ -196,6 +219,8 @@ pub struct Env {
     world: World,
     cams: [usize; 2],
     burners: Vec<(usize, usize)>,
+    /// Geoms of the left and the right finger (for the grasp flag of [`ObjectState`]).
+    fingers: [Vec<usize>; 2],
 }
 
 impl Env {
@@ -305,6 +330,21 @@ impl Env {
             World::Minimal { .. } => Vec::new(),
         };
         let osc = OscPose::new(ids.clone(), &mut data);
+        // Finger geoms by their bodies: robosuite's Panda hand and ours name them alike.
+        let finger_of = |g: usize| {
+            let body = model.name(ObjType::Body, model.geom_body(g)).unwrap_or("");
+            match body {
+                "gripper0_leftfinger" | "gripper0_finger_joint1_tip" => Some(0),
+                "gripper0_rightfinger" | "gripper0_finger_joint2_tip" => Some(1),
+                _ => None,
+            }
+        };
+        let mut fingers = [Vec::new(), Vec::new()];
+        for g in 0..model.ngeom() {
+            if let Some(side) = finger_of(g) {
+                fingers[side].push(g);
+            }
+        }
         Ok(Env {
             model,
             data,
@@ -317,6 +357,7 @@ impl Env {
             world,
             cams,
             burners,
+            fingers,
         })
     }
 
@@ -602,6 +643,32 @@ impl Env {
         Ok(())
     }
 
+    /// The privileged state of every scene instance now (empty for the minimal scene).
+    pub fn object_states(&self) -> Vec<ObjectState> {
+        let World::Task(scene, _) = &self.world else {
+            return Vec::new();
+        };
+        let contacts = self.data.contacts();
+        scene
+            .instances
+            .iter()
+            .map(|inst| {
+                let touches = |side: usize| {
+                    contacts.iter().any(|c| {
+                        let f = &self.fingers[side];
+                        (f.contains(&c.geom1) && inst.geoms.contains(&c.geom2))
+                            || (f.contains(&c.geom2) && inst.geoms.contains(&c.geom1))
+                    })
+                };
+                ObjectState {
+                    pos: self.data.body_pos(inst.root_body),
+                    quat: self.data.body_quat(inst.root_body),
+                    grasped: touches(0) && touches(1),
+                }
+            })
+            .collect()
+    }
+
     /// Observes the current state (renders the cameras if enabled).
     pub fn observe(&mut self) -> Result<Observation, EnvError> {
         let eef_pos = self.data.site_pos(self.ids.grip_site);
@@ -637,6 +704,7 @@ impl Env {
             eef_pos,
             eef_quat,
             goal: self.goal(),
+            objects: self.object_states(),
         };
         if let Some(r) = self.renderer.as_mut() {
             if let World::Task(scene, _) = &self.world {
