@@ -342,11 +342,12 @@ impl Processor {
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
     use crate::config::Variant;
 
-    fn cfg() -> TextConfig {
+    /// A five-word vocabulary, six tokens (shared with the text encoder's tests).
+    pub(crate) fn cfg() -> TextConfig {
         TextConfig {
             vocab: vec![
                 "bowl".into(),

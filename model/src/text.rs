@@ -68,20 +68,8 @@ impl TextEncoder {
 mod tests {
     use super::*;
     use crate::io::Tokenizer;
+    use crate::io::tests::cfg;
     use crate::test_device;
-
-    fn cfg() -> TextConfig {
-        TextConfig {
-            vocab: vec![
-                "bowl".into(),
-                "on".into(),
-                "plate".into(),
-                "put".into(),
-                "the".into(),
-            ],
-            max_len: 6,
-        }
-    }
 
     #[test]
     fn encoder_shapes_mask_and_pooling() {

@@ -37,20 +37,14 @@ impl DenseTokens {
     pub fn window(&self, feats: Tensor<4>, carry: Carry, shared: Shared) -> Result<WindowTokens> {
         let [b, t, m, d_f] = feats.dims();
         let tokens = self.tokens(feats.reshape([b * t, m, d_f]), shared);
-        let (tokens, pad, history, history_valid) = match &self.history {
-            Some(h) => {
-                let (x, pad, last, valid) = h.window(tokens, b, t, &carry);
-                (x, Some(pad), Some(last), Some(valid))
-            }
-            None => (tokens, None, None, None),
-        };
+        let h = History::window_of(self.history.as_ref(), tokens, b, t, &carry);
         Ok(WindowTokens {
-            tokens,
-            pad,
+            tokens: h.tokens,
+            pad: h.pad,
             parts: WindowParts::default(),
             carry: Carry {
-                history,
-                history_valid,
+                history: h.last,
+                history_valid: h.valid,
                 ..Carry::default()
             },
         })
@@ -60,9 +54,6 @@ impl DenseTokens {
     /// - feats: `[1, M, D_f]`; output: `[1, V, D_dec]`
     pub fn step(&self, feats: Tensor<3>, memory: &mut Memory, shared: Shared) -> Tensor<3> {
         let tokens = self.tokens(feats, shared);
-        match &self.history {
-            Some(h) => h.step(tokens, &mut memory.history),
-            None => tokens,
-        }
+        History::step_of(self.history.as_ref(), tokens, &mut memory.history)
     }
 }

@@ -170,12 +170,7 @@ impl SlotSsmTokens {
         shared: Shared,
     ) -> Result<Tensor<3>> {
         let device = feats.device();
-        let (slots, masks) = self
-            .core
-            .slot_attention
-            .step(feats.clone(), memory.slots.take());
-        memory.slots = Some(slots.clone());
-        memory.masks = Some(masks);
+        let slots = self.core.step(feats.clone(), memory);
         let k = self.core.slot_attention.num_slots();
         let state = memory
             .ssm

@@ -124,6 +124,52 @@ impl History {
         (self.stack(frames), Tensor::cat(pads, 1), last, last_valid)
     }
 
+    /// [`History::window`] for a variant whose history may be absent (h = 1: the tokens as they
+    /// are, no padding, nothing carried).
+    ///
+    /// # Shapes
+    /// - as [`History::window`]
+    pub fn window_of(
+        history: Option<&History>,
+        tokens: Tensor<3>,
+        b: usize,
+        t: usize,
+        carry: &Carry,
+    ) -> WindowHistory {
+        match history {
+            Some(h) => {
+                let (tokens, pad, last, valid) = h.window(tokens, b, t, carry);
+                WindowHistory {
+                    tokens,
+                    pad: Some(pad),
+                    last: Some(last),
+                    valid: Some(valid),
+                }
+            }
+            None => WindowHistory {
+                tokens,
+                pad: None,
+                last: None,
+                valid: None,
+            },
+        }
+    }
+
+    /// [`History::step`] for a variant whose history may be absent (the frame's tokens alone).
+    ///
+    /// # Shapes
+    /// - tokens: `[1, V₁, D_dec]`; output: `[1, n·V₁, D_dec]`
+    pub fn step_of(
+        history: Option<&History>,
+        tokens: Tensor<3>,
+        frames: &mut VecDeque<Tensor<3>>,
+    ) -> Tensor<3> {
+        match history {
+            Some(h) => h.step(tokens, frames),
+            None => tokens,
+        }
+    }
+
     /// Appends this frame's tokens to a streaming history and returns what the decoder sees.
     ///
     /// # Shapes
@@ -135,4 +181,16 @@ impl History {
         }
         self.stack(history.iter().cloned().collect())
     }
+}
+
+/// A window's decoder tokens with their history (see [`History::window_of`]).
+pub struct WindowHistory {
+    /// `[B·T, V, D_dec]`.
+    pub tokens: Tensor<3>,
+    /// `[B·T, V]` (None without a history).
+    pub pad: Option<Tensor<2, Bool>>,
+    /// The last h − 1 frames' tokens, to carry.
+    pub last: Option<Tensor<4>>,
+    /// Their validity, to carry.
+    pub valid: Option<Tensor<2, Bool>>,
 }

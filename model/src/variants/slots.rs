@@ -5,7 +5,7 @@
 use burn::nn::{Linear, LinearConfig};
 use burn::prelude::*;
 
-use super::types::{Shared, TYPE_RELATION, TYPE_SLOT};
+use super::types::{Memory, Shared, TYPE_RELATION, TYPE_SLOT};
 use crate::config::ModelConfig;
 use crate::error::{ModelError, Result};
 use crate::heads::SlotDecoder;
@@ -103,6 +103,18 @@ impl SlotCore {
             .squeeze_dim::<3>(1)
             .detach();
         Ok((slots, masks, last))
+    }
+
+    /// Slots of one streamed frame, continuing from the memory's slots; updates the memory's
+    /// slots and masks.
+    ///
+    /// # Shapes
+    /// - feats: `[1, M, D_f]`; output: slots `[1, K, D]`
+    pub fn step(&self, feats: Tensor<3>, memory: &mut Memory) -> Tensor<3> {
+        let (slots, masks) = self.slot_attention.step(feats, memory.slots.take());
+        memory.slots = Some(slots.clone());
+        memory.masks = Some(masks);
+        slots
     }
 
     /// Slot and relation tokens of single frames for the decoder.

@@ -42,16 +42,10 @@ impl SlotVlaTokens {
         let [_, _, k, d] = slots.dims();
         let z = self.slot_proj.forward(slots.clone().reshape([b * t, k, d]));
         let tokens = self.core.tokens(feats.reshape([b * t, m, d_f]), z, shared);
-        let (tokens, pad, history, history_valid) = match &self.history {
-            Some(h) => {
-                let (x, pad, last, valid) = h.window(tokens, b, t, &carry);
-                (x, Some(pad), Some(last), Some(valid))
-            }
-            None => (tokens, None, None, None),
-        };
+        let h = History::window_of(self.history.as_ref(), tokens, b, t, &carry);
         Ok(WindowTokens {
-            tokens,
-            pad,
+            tokens: h.tokens,
+            pad: h.pad,
             parts: WindowParts {
                 slots: Some(slots),
                 masks: Some(masks),
@@ -59,8 +53,8 @@ impl SlotVlaTokens {
             },
             carry: Carry {
                 slots: Some(last),
-                history,
-                history_valid,
+                history: h.last,
+                history_valid: h.valid,
                 ..Carry::default()
             },
         })
@@ -69,18 +63,10 @@ impl SlotVlaTokens {
     /// # Shapes
     /// - feats: `[1, M, D_f]`; output: `[1, V, D_dec]`
     pub fn step(&self, feats: Tensor<3>, memory: &mut Memory, shared: Shared) -> Tensor<3> {
-        let (slots, masks) = self
-            .core
-            .slot_attention
-            .step(feats.clone(), memory.slots.take());
-        memory.slots = Some(slots.clone());
-        memory.masks = Some(masks);
+        let slots = self.core.step(feats.clone(), memory);
         let tokens = self
             .core
             .tokens(feats, self.slot_proj.forward(slots), shared);
-        match &self.history {
-            Some(h) => h.step(tokens, &mut memory.history),
-            None => tokens,
-        }
+        History::step_of(self.history.as_ref(), tokens, &mut memory.history)
     }
 }
