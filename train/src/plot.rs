@@ -142,8 +142,7 @@ pub fn loss_curve(
     }
     text(&mut img, LEFT + pw - 200, 12, "train", blue);
     text(&mut img, LEFT + pw - 140, 12, "val", red);
-    img.save(path)
-        .map_err(|e| TrainError::Other(format!("{}: {e}", path.display())))
+    data::fsio::write_png(path, &img).map_err(TrainError::from)
 }
 
 #[cfg(test)]

@@ -29,9 +29,7 @@ pub fn run(out: PathBuf, seed: u64, size: usize, camera: String) -> anyhow::Resu
         ));
     }
     let img = sim::sheet::contact_sheet(&tiles, 5).context("no tiles")?;
-    let tmp = out.with_extension("png.tmp");
-    img.save_with_format(&tmp, image::ImageFormat::Png)?;
-    std::fs::rename(&tmp, &out)?;
+    data::fsio::write_png(&out, &img)?;
     println!(
         "wrote {} ({} tasks, seed {seed}, camera {camera})",
         out.display(),

@@ -753,11 +753,9 @@ pub fn save_png(frame: &Frame, path: &std::path::Path) -> std::io::Result<()> {
         .ok_or_else(|| std::io::Error::other("frame has no RGB image"))?;
     let img = image::RgbImage::from_raw(frame.width as u32, frame.height as u32, rgb.clone())
         .ok_or_else(|| std::io::Error::other("RGB buffer does not match the frame size"))?;
-    let tmp = path.with_extension("png.tmp");
-    img.save_with_format(&tmp, image::ImageFormat::Png)
-        .map_err(std::io::Error::other)?;
-    std::fs::rename(&tmp, path).inspect_err(|_| {
-        let _ = std::fs::remove_file(&tmp);
+    data::fsio::write_png(path, &img).map_err(|e| match e {
+        data::DataError::Io { source, .. } => source,
+        other => std::io::Error::other(other),
     })
 }
 

@@ -204,15 +204,9 @@ pub(super) fn light_mesh(
     }
     let dir = out.parent().expect("lod/ has a parent");
     std::fs::create_dir_all(dir).map_err(|e| err(e.to_string()))?;
-    // Written beside the final name and renamed, so a reader never sees half a file; the name is
-    // unique per process and thread, as two workers may make the same mesh at once.
-    let tmp = dir.join(format!(
-        "{rel}.{}.{:?}.partial",
-        std::process::id(),
-        std::thread::current().id()
-    ));
-    std::fs::write(&tmp, text).map_err(|e| err(e.to_string()))?;
-    std::fs::rename(&tmp, &out).map_err(|e| err(e.to_string()))?;
+    // Atomic (a unique temporary beside it, then a rename): a reader never sees half a file, and
+    // two workers making the same mesh at once do not clash.
+    data::fsio::write_atomic(&out, text.as_bytes()).map_err(|e| err(e.to_string()))?;
     Ok(out)
 }
 
