@@ -1,16 +1,18 @@
 //! One input path: a recorded episode replayed through the training batcher (`train`'s
 //! `RunData::batch` over `data`'s windows) and through eval's policy input path
 //! (`eval::policy::model_input` on the live simulator observations of the same seed and
-//! actions) gives the same model tensors, bit for bit: frames, instruction ids and the oracle
-//! subgoal ids of every step.
+//! actions) gives the same model tensors, bit for bit: frames (or in state mode the object
+//! tokens and their categories), instruction ids and the oracle subgoal ids of every step
+//! (pending text for pixels, the per-object labels in state mode).
 
 use burn::prelude::*;
+use model::Frames;
 
 fn ints(t: Tensor<2, Int>) -> Vec<i64> {
     t.try_to_vec_as::<i64>().unwrap()
 }
 
-fn floats(t: Tensor<4>) -> Vec<u32> {
+fn floats<const D: usize>(t: Tensor<D>) -> Vec<u32> {
     // Bit patterns: equality of every f32 bit, not within a tolerance.
     t.try_to_vec_as::<f32>()
         .unwrap()
@@ -19,8 +21,8 @@ fn floats(t: Tensor<4>) -> Vec<u32> {
         .collect()
 }
 
-#[test]
-fn recorded_episode_gives_equal_tensors_in_training_and_in_eval() {
+/// Replays episode 0 of a generated T2 dataset through both paths in `obs` mode.
+fn replay(obs: train::config::ObsMode) {
     let tmp = tempfile::tempdir().unwrap();
     let data_dir = tmp.path().join("data");
     // T2 has several subgoals, so the subgoal input changes during the episode.
@@ -39,52 +41,80 @@ fn recorded_episode_gives_equal_tensors_in_training_and_in_eval() {
     // The training side, as `train` builds it (oracle variant: it reads the subgoal too).
     let mut cfg = e2e::tiny_config(&data_dir, 1);
     cfg.model.variant = "e_slotssm_oracle".into();
+    cfg.model.obs = obs;
     cfg.data.augment = false;
     let vocab = train::dataset::RunData::model_vocab(&index).unwrap();
-    let mcfg = cfg.model_config(vocab).unwrap();
-    let run_data = train::dataset::RunData::open(&cfg, &mcfg).unwrap();
+    let mut mcfg = cfg.model_config(vocab).unwrap();
+    let spec = (obs == train::config::ObsMode::State)
+        .then(|| train::dataset::state_spec(&data_dir, &index).unwrap());
+    if let Some(s) = &spec {
+        mcfg = mcfg.with_state(s.tokens(), s.num_categories());
+    }
+    let run_data = train::dataset::RunData::open(&cfg, &mcfg, spec).unwrap();
     let device = Device::flex();
     let w = cfg.window_len();
-    let last = |t: Tensor<5>| {
-        let [_, _, c, h, wd] = t.dims();
-        t.narrow(1, w - 1, 1).reshape([1, c, h, wd])
-    };
 
-    // The eval side: replay the recorded actions from the recorded seed, live.
+    // The eval side: the model policy's input path on the recorded actions replayed live from
+    // the recorded seed.
     let mut env = sim::Env::from_task(
         &task,
         sim::EnvConfig {
             image_size: gen_cfg.image_size,
-            segmentation: true,
+            render: obs == train::config::ObsMode::Pixels,
+            segmentation: obs == train::config::ObsMode::Pixels,
             ..Default::default()
         },
     )
     .unwrap();
-    let mut obs = env.reset(episode.meta().seed).unwrap();
-    let processor = &run_data.processor;
+    let model = model::PolicyModel::new(&mcfg, &device).unwrap();
+    let mut policy =
+        eval::policy::ModelPolicy::new(model, run_data.processor.clone(), &device).unwrap();
+    let seed = episode.meta().seed;
+    eval::policy::Policy::reset(&mut policy, &task, seed).unwrap();
+    let mut obs_t = env.reset(seed).unwrap();
     let mut subgoal_changes = 0;
     let mut previous_subgoal = None;
     for t in 0..n {
-        let live = eval::policy::model_input(processor, &task.instruction, &obs, &device).unwrap();
+        let live = policy.input(&env, &obs_t).unwrap();
         // Window ending at step t (past = w − 1, future = 0): its last frame is step t.
         let batch = run_data.batch(&run_data.train, &[(t, 0)], &device).unwrap();
-        assert_eq!(
-            floats(last(batch.images)),
-            floats(live.image),
-            "step {t}: frames differ"
-        );
+        match (batch.obs.narrow(w - 1, 1), live.obs) {
+            (Frames::Pixels(a), Frames::Pixels(b)) => {
+                assert_eq!(floats(a), floats(b), "step {t}: frames differ")
+            }
+            (Frames::State(a, ca), Frames::State(b, cb)) => {
+                assert_eq!(floats(a), floats(b), "step {t}: object tokens differ");
+                let [_, _, k] = ca.dims();
+                assert_eq!(
+                    ints(ca.reshape([1, k])),
+                    ints(cb.reshape([1, k])),
+                    "step {t}"
+                );
+            }
+            _ => panic!("step {t}: the two paths observe differently"),
+        }
         assert_eq!(ints(batch.instruction), ints(live.instruction), "step {t}");
         let sub_train = batch.subgoal.expect("the oracle variant reads subgoals");
-        let [_, _, _, l] = sub_train.dims();
-        let sub_train = ints(sub_train.narrow(1, w - 1, 1).reshape([1, l]));
-        let sub_live = ints(live.subgoal.expect("subgoal").reshape([1, l]));
+        let [_, _, g, l] = sub_train.dims();
+        let sub_train = ints(sub_train.narrow(1, w - 1, 1).reshape([g, l]));
+        let sub_live = ints(live.subgoal.expect("subgoal").reshape([g, l]));
         assert_eq!(sub_train, sub_live, "step {t}: subgoal ids differ");
         if previous_subgoal.as_ref() != Some(&sub_live) {
             subgoal_changes += 1;
             previous_subgoal = Some(sub_live);
         }
         let step = episode.read_step(t).unwrap();
-        obs = env.step(&step.action).unwrap();
+        obs_t = env.step(&step.action).unwrap();
     }
     assert!(subgoal_changes >= 2, "the subgoal input never changed");
+}
+
+#[test]
+fn recorded_episode_gives_equal_tensors_in_training_and_in_eval() {
+    replay(train::config::ObsMode::Pixels);
+}
+
+#[test]
+fn recorded_episode_gives_equal_state_tokens_and_labels_in_training_and_in_eval() {
+    replay(train::config::ObsMode::State);
 }

@@ -92,6 +92,7 @@ pub fn bench_windows(
             chunk: 4,
             image_size: size,
             wrist: false,
+            images: true,
             augment: Some(Augment::default()),
             seed: 0,
         };

@@ -60,6 +60,8 @@ pub struct WindowConfig {
     pub image_size: u32,
     /// Also produce eye-in-hand frames.
     pub wrist: bool,
+    /// Decode agentview frames (off for state-mode training: `images` stays empty).
+    pub images: bool,
     /// Augmentation (None = off).
     pub augment: Option<Augment>,
     /// Seed of the augmentation.
@@ -74,6 +76,7 @@ impl Default for WindowConfig {
             chunk: 4,
             image_size: 64,
             wrist: false,
+            images: true,
             augment: None,
             seed: 0,
         }
@@ -156,9 +159,11 @@ impl ActionNorm {
 pub struct WindowSample {
     /// Position of the episode in the index.
     pub episode: usize,
+    /// The episode's seed (from its metadata).
+    pub seed: u64,
     /// Centre step t.
     pub t: usize,
-    /// Agentview frames `[T, 3, H, W]`, values in [0, 1].
+    /// Agentview frames `[T, 3, H, W]`, values in [0, 1] (empty when not decoded).
     pub images: Vec<f32>,
     /// Eye-in-hand frames `[T, 3, H, W]` when configured.
     pub wrist_images: Option<Vec<f32>>,
@@ -177,7 +182,8 @@ pub struct WindowSample {
     /// `[T]` goal progress as the policy observes it at each frame: before that frame's action
     /// (see [`observed_progress`]), as an environment reports it with the frame.
     pub goals: Vec<GoalProgress>,
-    /// `[T]` object annotations per frame.
+    /// `[T]` object annotations per frame, with the subgoal labels as the policy observes them
+    /// at that frame (the labels recorded at the step before, see [`observed_labels`]).
     pub objects: Vec<Vec<ObjectAnnotation>>,
 }
 
@@ -342,6 +348,7 @@ impl WindowDataset {
         let first = lo.saturating_sub(1);
         let all = r.read_raw_steps(first..last + 1)?;
         let before = (lo > first).then(|| all[0].progress.clone());
+        let before_objects = (lo > first).then(|| all[0].objects.as_slice());
         let raw = &all[lo - first..];
 
         let mut rng = ChaCha8Rng::seed_from_u64(aug_seed);
@@ -373,7 +380,7 @@ impl WindowDataset {
             }
             Ok(out)
         };
-        let images = frames(false)?;
+        let images = if c.images { frames(false)? } else { Vec::new() };
         let wrist_images = if c.wrist { Some(frames(true)?) } else { None };
         let mut actions = Vec::with_capacity(tl * c.chunk * 7);
         let mut action_mask = Vec::with_capacity(tl * c.chunk);
@@ -388,6 +395,7 @@ impl WindowDataset {
         }
         Ok(WindowSample {
             episode: *episode,
+            seed: r.meta().seed,
             t,
             images,
             wrist_images,
@@ -409,7 +417,14 @@ impl WindowDataset {
                 .collect(),
             objects: frame_steps
                 .iter()
-                .map(|&f| raw[f - lo].objects.clone())
+                .map(|&f| {
+                    let previous = if f == lo {
+                        before_objects
+                    } else {
+                        Some(raw[f - 1 - lo].objects.as_slice())
+                    };
+                    observed_labels(previous, &raw[f - lo].objects)
+                })
                 .collect(),
             frame_steps,
         })
@@ -435,6 +450,25 @@ pub fn observed_progress(previous: Option<&GoalProgress>, current: &GoalProgress
                 .unwrap_or_default(),
         },
     }
+}
+
+/// The objects a policy observes at a step: as recorded there, with the subgoal labels recorded
+/// at the step before (the recorder gives a step the labels after its action, like its progress;
+/// see [`observed_progress`]). At step 0 (`previous` = None) every label is `"0"`.
+pub fn observed_labels(
+    previous: Option<&[ObjectAnnotation]>,
+    current: &[ObjectAnnotation],
+) -> Vec<ObjectAnnotation> {
+    current
+        .iter()
+        .enumerate()
+        .map(|(i, o)| ObjectAnnotation {
+            subgoal_label: previous
+                .and_then(|p| p.get(i))
+                .map_or_else(|| "0".to_string(), |p| p.subgoal_label.clone()),
+            ..o.clone()
+        })
+        .collect()
 }
 
 /// An upright RGB frame as a policy input: resized to `size`² (the `image` crate's filter, see

@@ -2,9 +2,11 @@
 //! expert and the two floors (zero and random actions).
 
 use burn::prelude::Device;
+use data::ObjectAnnotation;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use sim::expert::Expert;
+use sim::labels::LabelTracker;
 use sim::task::TaskSpec;
 use sim::{Env, Observation};
 
@@ -98,9 +100,10 @@ impl Policy for ExpertPolicy {
 }
 
 /// A trained model run step by step through the policy's one input path
-/// ([`model::Processor`], saved with the run): each step the agentview frame, the instruction
-/// and the goal progress the environment reports go in (the processor decides what the variant
-/// reads of them, exactly as in training); the first action of the predicted chunk comes out,
+/// ([`model::Processor`], saved with the run): each step the agentview frame (or, in state
+/// mode, the objects' poses, grasps and oracle labels), the instruction and the goal progress
+/// the environment reports go in (the processor decides what the variant reads of them, exactly
+/// as in training); the first action of the predicted chunk comes out,
 /// un-normalised by the processor, clamped to [−1, 1], with the gripper binarised by its sign
 /// (as upstream `mem_6`).
 pub struct ModelPolicy {
@@ -108,6 +111,8 @@ pub struct ModelPolicy {
     processor: model::Processor,
     instruction: String,
     grid: [usize; 2],
+    seed: u64,
+    labels: Option<LabelTracker>,
 }
 
 impl ModelPolicy {
@@ -125,7 +130,34 @@ impl ModelPolicy {
             processor,
             instruction: String::new(),
             grid,
+            seed: 0,
+            labels: None,
         })
+    }
+
+    /// The model inputs of the observation `obs` of `env` at the next step of the episode
+    /// (call once per step, after [`Policy::reset`]; in state mode it also advances the oracle
+    /// labels, as the recorder does).
+    pub fn input(&mut self, env: &Env, obs: &Observation) -> Result<model::StepInput, EvalError> {
+        let objects = if self.processor.reads_state() {
+            // The labels as the recorder writes them: updated after every step (not at reset).
+            match self.labels.as_mut() {
+                Some(t) => t.update(env, obs.goal.as_ref()),
+                None => self.labels = LabelTracker::new(env),
+            }
+            let labels = self.labels.as_ref().map_or(&[][..], LabelTracker::labels);
+            object_annotations(env, obs, labels)
+        } else {
+            Vec::new()
+        };
+        model_input(
+            &self.processor,
+            &self.instruction,
+            obs,
+            &objects,
+            self.seed,
+            self.policy.device(),
+        )
     }
 
     /// Whether the oracle subgoal is fed to the model.
@@ -134,29 +166,62 @@ impl ModelPolicy {
     }
 }
 
-/// Eval's input path: one simulator observation → the model's inputs, through `processor`.
+/// The objects of a task scene as the episode files record them: instance names in scene order,
+/// the observed poses and grasps, and the given oracle labels.
+pub fn object_annotations(
+    env: &Env,
+    obs: &Observation,
+    labels: &[String],
+) -> Vec<ObjectAnnotation> {
+    let Some(scene) = env.scene() else {
+        return Vec::new();
+    };
+    scene
+        .instances
+        .iter()
+        .zip(&obs.objects)
+        .enumerate()
+        .map(|(k, (inst, st))| ObjectAnnotation {
+            instance_id: k as i32 + 1,
+            name: inst.name.clone(),
+            bbox: [0.0; 4],
+            visible: false,
+            subgoal_label: labels.get(k).cloned().unwrap_or_else(|| "0".into()),
+            pose: Some(st.pose()),
+            grasped: Some(st.grasped),
+        })
+        .collect()
+}
+
+/// Eval's input path: one simulator observation → the model's inputs, through `processor`
+/// (`objects` and `seed` are read in state mode only).
 pub fn model_input(
     processor: &model::Processor,
     instruction: &str,
     obs: &Observation,
+    objects: &[ObjectAnnotation],
+    seed: u64,
     device: &Device,
 ) -> Result<model::StepInput, EvalError> {
     let s = obs.image_size as u32;
-    if s == 0 || obs.agentview_rgb.len() != (s * s * 3) as usize {
+    let rendered = s > 0 && obs.agentview_rgb.len() == (s * s * 3) as usize;
+    if !rendered && !processor.reads_state() {
         return Err(EvalError::Model(
             "the model needs rendered agentview frames".into(),
         ));
     }
-    let frame = data::RgbImage {
+    let frame = rendered.then(|| data::RgbImage {
         width: s,
         height: s,
         channels: 3,
         data: obs.agentview_rgb.clone(),
-    };
+    });
     let goal = obs.goal.as_ref().map(sim::GoalStatus::progress);
     let step = model::StepObservation {
-        agentview: &frame,
+        agentview: frame.as_ref(),
         state: obs.state,
+        objects,
+        seed,
         instruction,
         goal: goal.as_ref(),
     };
@@ -178,19 +243,16 @@ pub fn finish_action(a: [f32; 7]) -> [f32; 7] {
 }
 
 impl Policy for ModelPolicy {
-    fn reset(&mut self, task: &TaskSpec, _: u64) -> Result<(), EvalError> {
+    fn reset(&mut self, task: &TaskSpec, seed: u64) -> Result<(), EvalError> {
         self.policy.reset();
         self.instruction = task.instruction.clone();
+        self.seed = seed;
+        self.labels = None;
         Ok(())
     }
 
-    fn act(&mut self, _: &Env, obs: &Observation) -> Result<[f32; 7], EvalError> {
-        let input = model_input(
-            &self.processor,
-            &self.instruction,
-            obs,
-            self.policy.device(),
-        )?;
+    fn act(&mut self, env: &Env, obs: &Observation) -> Result<[f32; 7], EvalError> {
+        let input = self.input(env, obs)?;
         let chunk = self.policy.act_input(input)?;
         let first: [f32; 7] = chunk
             .first()
@@ -200,7 +262,7 @@ impl Policy for ModelPolicy {
     }
 
     fn needs_images(&self) -> bool {
-        true
+        !self.processor.reads_state()
     }
 
     fn slot_masks(&self) -> Option<(Vec<Vec<f32>>, usize, usize)> {

@@ -43,7 +43,7 @@ fn train_step_ms(variant: &str, reps: usize) -> f64 {
     let tok = Tokenizer::new(&cfg.text);
     let texts = vec![INSTRUCTION; b];
     let batch = WindowBatch {
-        images: Tensor::random([b, t, 3, 64, 64], Distribution::Uniform(0.0, 1.0), &device),
+        obs: Tensor::random([b, t, 3, 64, 64], Distribution::Uniform(0.0, 1.0), &device).into(),
         actions: Tensor::random([b, t, 4, 7], Distribution::Uniform(-1.0, 1.0), &device),
         frame_mask: Tensor::ones([b, t], &device),
         action_mask: None,

@@ -100,6 +100,39 @@ impl Variant {
     }
 }
 
+/// What the policy observes per frame.
+#[derive(Serialize, Deserialize, Clone, Debug, PartialEq, Eq, Default)]
+#[serde(tag = "kind", rename_all = "snake_case", deny_unknown_fields)]
+pub enum Observation {
+    /// The agentview camera image (model.md §1): CNN features, slot attention.
+    #[default]
+    Pixels,
+    /// The simulator's privileged object state (MIKASA-Robo's oracle-state mode): one token per
+    /// object (category, position, orientation, grasp; see [`crate::io::state`]) plus one for the
+    /// robot. The object tokens are the slots ("oracle slots"); no image, no slot attention.
+    State {
+        /// Tokens per frame N (objects padded to N − 1, then the robot); K = N for slot variants.
+        tokens: usize,
+        /// Category ids (padding, unknown and robot included).
+        categories: usize,
+    },
+}
+
+impl Observation {
+    /// Whether the policy reads the object state instead of pixels.
+    pub fn is_state(&self) -> bool {
+        matches!(self, Observation::State { .. })
+    }
+
+    /// Its name as in configs and on the command line (`pixels`, `state`).
+    pub fn name(&self) -> &'static str {
+        match self {
+            Observation::Pixels => "pixels",
+            Observation::State { .. } => "state",
+        }
+    }
+}
+
 /// Visual encoder (model.md §1): a CNN, soft position embedding, LN and MLP.
 #[derive(Serialize, Deserialize, Clone, Debug, PartialEq)]
 #[serde(deny_unknown_fields)]
@@ -252,6 +285,9 @@ pub struct LossConfig {
 pub struct ModelConfig {
     /// Which policy.
     pub variant: Variant,
+    /// What it observes (pixels unless said otherwise).
+    #[serde(default)]
+    pub observation: Observation,
     /// Input image size [H, W] (agentview, RGB).
     pub image_size: [usize; 2],
     /// Visual encoder.
@@ -277,6 +313,7 @@ impl ModelConfig {
     pub fn tiny(variant: Variant) -> Self {
         ModelConfig {
             variant,
+            observation: Observation::Pixels,
             image_size: [64, 64],
             encoder: EncoderConfig {
                 channels: vec![32, 64, 64],
@@ -336,6 +373,7 @@ impl ModelConfig {
     pub fn full(variant: Variant) -> Self {
         ModelConfig {
             variant,
+            observation: Observation::Pixels,
             image_size: [224, 224],
             encoder: EncoderConfig {
                 channels: vec![64, 128, 256, 256],
@@ -410,10 +448,24 @@ impl ModelConfig {
         g
     }
 
-    /// Visual tokens per frame M.
+    /// Visual tokens per frame M (state mode: the object and robot tokens N).
     pub fn num_patches(&self) -> usize {
-        let [h, w] = self.grid();
-        h * w
+        match self.observation {
+            Observation::Pixels => {
+                let [h, w] = self.grid();
+                h * w
+            }
+            Observation::State { tokens, .. } => tokens,
+        }
+    }
+
+    /// The same model reading the object state: N = `tokens` tokens per frame (K = N slots),
+    /// `categories` category ids, no slot reconstruction (there is no image).
+    pub fn with_state(mut self, tokens: usize, categories: usize) -> Self {
+        self.observation = Observation::State { tokens, categories };
+        self.slots.num_slots = tokens;
+        self.loss.slot_recon = 0.0;
+        self
     }
 
     /// Width of one slot-reconstruction target: one RGB patch (patch_h · patch_w · 3).
@@ -424,7 +476,7 @@ impl ModelConfig {
 
     /// Whether the slot decoder (L_sa) is built.
     pub fn has_sa_decoder(&self) -> bool {
-        self.variant.has_slots() && self.loss.slot_recon > 0.0
+        self.variant.has_slots() && self.loss.slot_recon > 0.0 && !self.observation.is_state()
     }
 
     /// Floats of streaming state that do not depend on the episode length (model.md §10):
@@ -495,6 +547,21 @@ impl ModelConfig {
         }
         if self.loss.tau <= 0.0 {
             return err("loss.tau must be > 0".into());
+        }
+        if let Observation::State { tokens, categories } = self.observation {
+            if tokens < 2 || categories < 3 {
+                return err(format!(
+                    "observation: {tokens} tokens and {categories} categories; state mode needs \
+                     ≥ 2 tokens (an object and the robot) and ≥ 3 categories"
+                ));
+            }
+            if self.variant.has_slots() && self.slots.num_slots != tokens {
+                return err(format!(
+                    "observation: state mode gives one slot per token: slots.num_slots = {} but \
+                     {tokens} tokens",
+                    self.slots.num_slots
+                ));
+            }
         }
         Ok(())
     }

@@ -1,12 +1,176 @@
-//! Visual encoder (model.md §1): a small CNN, a soft position embedding, LN and an MLP.
+//! What the policy observes, encoded into M feature tokens per frame: the visual encoder of
+//! model.md §1 (a small CNN, a soft position embedding, LN and an MLP) for pixels, or the state
+//! encoder (category embedding + linear map of each object's pose and grasp, LN and an MLP) for
+//! the object state.
 
 use burn::nn::conv::{Conv2d, Conv2dConfig};
-use burn::nn::{LayerNorm, Linear, LinearConfig, PaddingConfig2d};
+use burn::nn::{Embedding, EmbeddingConfig, LayerNorm, Linear, LinearConfig, PaddingConfig2d};
 use burn::prelude::*;
 use burn::tensor::activation::relu;
 
 use crate::blocks::{Act, Mlp, layer_norm};
-use crate::config::ModelConfig;
+use crate::config::{ModelConfig, Observation};
+use crate::error::{ModelError, Result};
+use crate::io::state::FEATURES;
+
+/// A window of observations, as the model's [`Observer`] reads them.
+#[derive(Clone, Debug)]
+pub enum Frames {
+    /// Agentview RGB in [0, 1] `[B, T, 3, H, W]`.
+    Pixels(Tensor<5>),
+    /// Object and robot tokens: features `[B, T, N, F]` and category ids `[B, T, N]`
+    /// (see [`crate::io::state`]).
+    State(Tensor<4>, Tensor<3, Int>),
+}
+
+impl From<Tensor<5>> for Frames {
+    fn from(images: Tensor<5>) -> Self {
+        Frames::Pixels(images)
+    }
+}
+
+impl Frames {
+    /// Batch and time `[B, T]`.
+    pub fn batch_time(&self) -> [usize; 2] {
+        match self {
+            Frames::Pixels(x) => {
+                let [b, t, ..] = x.dims();
+                [b, t]
+            }
+            Frames::State(x, _) => {
+                let [b, t, ..] = x.dims();
+                [b, t]
+            }
+        }
+    }
+
+    /// The images (None in state mode).
+    pub fn pixels(&self) -> Option<Tensor<5>> {
+        match self {
+            Frames::Pixels(x) => Some(x.clone()),
+            Frames::State(..) => None,
+        }
+    }
+
+    /// Frames `start..start + len` of every window.
+    pub fn narrow(&self, start: usize, len: usize) -> Frames {
+        match self {
+            Frames::Pixels(x) => Frames::Pixels(x.clone().narrow(1, start, len)),
+            Frames::State(x, c) => Frames::State(
+                x.clone().narrow(1, start, len),
+                c.clone().narrow(1, start, len),
+            ),
+        }
+    }
+}
+
+/// The encoder of what the model observes: one token sequence `[B, T, M, D_f]` per window.
+// One per model, like the variants' token builders.
+#[allow(clippy::large_enum_variant)]
+#[derive(Module, Debug)]
+pub enum Observer {
+    /// The CNN of model.md §1.
+    Pixels(VisualEncoder),
+    /// The object-state encoder.
+    State(StateEncoder),
+}
+
+impl Observer {
+    /// The encoder of `config.observation`.
+    pub fn new(config: &ModelConfig, device: &Device) -> Self {
+        match config.observation {
+            Observation::Pixels => Observer::Pixels(VisualEncoder::new(config, device)),
+            Observation::State { tokens, categories } => Observer::State(StateEncoder::new(
+                tokens,
+                categories,
+                config.encoder.feature_dim,
+                device,
+            )),
+        }
+    }
+
+    /// Feature tokens of a window.
+    ///
+    /// # Shapes
+    /// - frames: see [`Frames`]; output: `[B, T, M, D_f]`
+    pub fn forward(&self, frames: Frames) -> Result<Tensor<4>> {
+        match (self, frames) {
+            (Observer::Pixels(enc), Frames::Pixels(images)) => {
+                let [_, _, c, h, w] = images.dims();
+                if c != 3 || [h, w] != enc.image_size {
+                    return Err(ModelError::Input(format!(
+                        "images {:?}, expected [B, T, 3, {}, {}]",
+                        images.dims(),
+                        enc.image_size[0],
+                        enc.image_size[1]
+                    )));
+                }
+                Ok(enc.forward(images))
+            }
+            (Observer::State(enc), Frames::State(x, c)) => enc.forward(x, c),
+            (Observer::Pixels(_), Frames::State(..)) => Err(ModelError::Input(
+                "the model reads pixels but was given object state".into(),
+            )),
+            (Observer::State(_), Frames::Pixels(_)) => Err(ModelError::Input(
+                "the model reads object state but was given pixels".into(),
+            )),
+        }
+    }
+}
+
+/// Object-state encoder: token i → LN(W x_i + E[c_i]) → MLP, x_i the [`FEATURES`] numbers of
+/// [`crate::io::state`] and c_i its category.
+#[derive(Module, Debug)]
+pub struct StateEncoder {
+    /// Category embeddings `[C, D_f]`.
+    pub category: Embedding,
+    /// Features to width `[F, D_f]`.
+    pub input: Linear,
+    /// Norm `[D_f]`.
+    pub norm: LayerNorm,
+    /// MLP D_f → D_f → D_f.
+    pub mlp: Mlp,
+    /// Tokens per frame N.
+    pub tokens: usize,
+}
+
+impl StateEncoder {
+    /// An encoder of `tokens` tokens over `categories` categories into width `d_f`.
+    pub fn new(tokens: usize, categories: usize, d_f: usize, device: &Device) -> Self {
+        StateEncoder {
+            category: EmbeddingConfig::new(categories, d_f).init(device),
+            input: LinearConfig::new(FEATURES, d_f).init(device),
+            norm: layer_norm(d_f, device),
+            mlp: Mlp::new(d_f, d_f, d_f, Act::Relu, device),
+            tokens,
+        }
+    }
+
+    /// Encodes the tokens of a window.
+    ///
+    /// # Shapes
+    /// - features: `[B, T, N, F]`; categories: `[B, T, N]`
+    /// - output: `[B, T, N, D_f]`
+    pub fn forward(&self, features: Tensor<4>, categories: Tensor<3, Int>) -> Result<Tensor<4>> {
+        let [b, t, n, f] = features.dims();
+        if n != self.tokens || f != FEATURES || categories.dims() != [b, t, n] {
+            return Err(ModelError::Input(format!(
+                "state features {:?} / categories {:?}, expected [B, T, {}, {FEATURES}] / [B, T, {}]",
+                features.dims(),
+                categories.dims(),
+                self.tokens,
+                self.tokens
+            )));
+        }
+        let d_f = self.input.weight.dims()[1];
+        let e = self
+            .category
+            .forward(categories.reshape([b * t, n]))
+            .reshape([b, t, n, d_f]);
+        let x = self.input.forward(features) + e;
+        Ok(self.mlp.forward(self.norm.forward(x)))
+    }
+}
 
 /// ImageNet channel means.
 pub const IMAGENET_MEAN: [f32; 3] = [0.485, 0.456, 0.406];

@@ -52,7 +52,8 @@ pub mod streaming;
 pub mod text;
 pub mod variants;
 
-pub use config::{ModelConfig, Variant};
+pub use config::{ModelConfig, Observation, Variant};
+pub use encoder::Frames;
 pub use error::{ModelError, Result};
 pub use io::{Processor, StepInput, StepObservation, Tokenizer};
 pub use policy::{Carry, Losses, PolicyModel, WindowBatch, WindowOutput};

@@ -11,7 +11,7 @@ use burn::tensor::Distribution;
 
 use crate::config::{ActionHead, ModelConfig};
 use crate::decoder::{ActionDecoder, DecoderOutput};
-use crate::encoder::VisualEncoder;
+use crate::encoder::{Frames, Observer};
 use crate::error::{ModelError, Result};
 use crate::losses;
 use crate::text::TextEncoder;
@@ -21,8 +21,8 @@ use crate::variants::{Shared, TokenBuilder};
 /// A training batch of windows.
 #[derive(Clone, Debug)]
 pub struct WindowBatch {
-    /// Agentview RGB in [0, 1] `[B, T, 3, H, W]`.
-    pub images: Tensor<5>,
+    /// What the model observes: agentview RGB in [0, 1] `[B, T, 3, H, W]` or object state.
+    pub obs: Frames,
     /// Normalised target chunks a*_{t..t+H_a−1} `[B, T, H_a, A]`.
     pub actions: Tensor<4>,
     /// 1 for valid frames, 0 for padding `[B, T]`.
@@ -71,8 +71,8 @@ pub struct Losses {
 /// variant's [`TokenBuilder`].
 #[derive(Module, Debug)]
 pub struct PolicyModel {
-    /// Visual encoder.
-    pub encoder: VisualEncoder,
+    /// Encoder of the observations (pixels or object state).
+    pub encoder: Observer,
     /// The variant: visual features → decoder tokens, with its memory.
     pub tokens: TokenBuilder,
     /// Visual token types (relation, slot, patch) `[3, D_dec]`.
@@ -92,7 +92,7 @@ impl PolicyModel {
         config.validate()?;
         let w = config.decoder.width;
         Ok(PolicyModel {
-            encoder: VisualEncoder::new(config, device),
+            encoder: Observer::new(config, device),
             tokens: TokenBuilder::new(config, device),
             token_type: Param::from_tensor(Tensor::random(
                 [3, w],
@@ -142,12 +142,12 @@ impl PolicyModel {
     /// Prediction over windows that start at the episode start (no losses).
     ///
     /// # Shapes
-    /// - images: `[B, T, 3, H, W]` in [0, 1]; instruction: `[B, L_txt]`;
-    ///   subgoal: `[B, T, G, L_sg]`
+    /// - obs: images `[B, T, 3, H, W]` in [0, 1] or state (see [`Frames`]);
+    ///   instruction: `[B, L_txt]`; subgoal: `[B, T, G, L_sg]`
     /// - output: see [`WindowOutput`]
     pub fn predict(
         &self,
-        images: Tensor<5>,
+        images: impl Into<Frames>,
         instruction: Tensor<2, Int>,
         subgoal: Option<Tensor<4, Int>>,
     ) -> Result<WindowOutput> {
@@ -162,21 +162,14 @@ impl PolicyModel {
     /// - as [`PolicyModel::predict`]; carry slots `[B, K, D]`, SSM state over B·K sequences
     pub fn predict_from(
         &self,
-        images: Tensor<5>,
+        obs: impl Into<Frames>,
         instruction: Tensor<2, Int>,
         subgoal: Option<Tensor<4, Int>>,
         carry: Carry,
     ) -> Result<(WindowOutput, Carry)> {
-        let [b, t, c, h, w] = images.dims();
+        let obs = obs.into();
+        let [b, t] = obs.batch_time();
         let cfg = &self.config;
-        if c != 3 || [h, w] != cfg.image_size {
-            return Err(ModelError::Input(format!(
-                "images {:?}, expected [B, T, 3, {}, {}]",
-                images.dims(),
-                cfg.image_size[0],
-                cfg.image_size[1]
-            )));
-        }
         let [b2, l_txt] = instruction.dims();
         if b2 != b || l_txt > cfg.text.max_len {
             return Err(ModelError::Input(format!(
@@ -185,7 +178,7 @@ impl PolicyModel {
                 cfg.text.max_len
             )));
         }
-        let feats = self.encoder.forward(images); // [B, T, M, D_f]
+        let feats = self.encoder.forward(obs)?; // [B, T, M, D_f]
         let (token_type, text) = self.shared();
         let shared = Shared {
             token_type: &token_type,
@@ -227,7 +220,7 @@ impl PolicyModel {
         carry: Carry,
     ) -> Result<(WindowOutput, Losses, Carry)> {
         let cfg = &self.config;
-        let [b, t, _, _, _] = batch.images.dims();
+        let [b, t] = batch.obs.batch_time();
         let (ha, a) = (cfg.decoder.horizon, cfg.decoder.action_dim);
         if batch.actions.dims() != [b, t, ha, a] || batch.frame_mask.dims() != [b, t] {
             return Err(ModelError::Input(format!(
@@ -237,7 +230,7 @@ impl PolicyModel {
             )));
         }
         let (out, carry) = self.predict_from(
-            batch.images.clone(),
+            batch.obs.clone(),
             batch.instruction.clone(),
             batch.subgoal.clone(),
             carry,
@@ -280,12 +273,12 @@ impl PolicyModel {
             .tokens
             .slot_core()
             .and_then(|c| c.slot_decoder.as_ref());
-        let slot_recon = match (slot_decoder, &out.slots) {
-            (Some(dec), Some(s)) => {
+        let slot_recon = match (slot_decoder, &out.slots, batch.obs.pixels()) {
+            (Some(dec), Some(s), Some(images)) => {
                 let [_, _, k, d] = s.dims();
                 let (recon, _) = dec.forward(s.clone().reshape([b * t, k, d]));
                 let [_, m, d_tgt] = recon.dims();
-                let target = losses::image_patches(batch.images.clone(), cfg.grid());
+                let target = losses::image_patches(images, cfg.grid());
                 Some(losses::slot_recon(
                     recon.reshape([b, t, m, d_tgt]),
                     target,
@@ -363,7 +356,7 @@ mod tests {
         let mut mask = vec![1.0f32; b * t];
         mask[b * t - 1] = 0.0; // last frame of the last sample is padding
         WindowBatch {
-            images: Tensor::random([b, t, 3, h, w], Distribution::Uniform(0.0, 1.0), device),
+            obs: Tensor::random([b, t, 3, h, w], Distribution::Uniform(0.0, 1.0), device).into(),
             actions: Tensor::random([b, t, ha, a], Distribution::Uniform(-1.0, 1.0), device),
             frame_mask: Tensor::from_data(TensorData::new(mask, [b, t]), device),
             action_mask: None,
@@ -590,7 +583,7 @@ mod tests {
             let cfg = micro(name);
             let model = PolicyModel::new(&cfg, &device).unwrap();
             let x = batch(&cfg, 1, 6, &device);
-            let frame = |t: usize| x.images.clone().narrow(1, t, 1).squeeze_dim::<4>(1);
+            let frame = |t: usize| x.obs.pixels().unwrap().narrow(1, t, 1).squeeze_dim::<4>(1);
             let mut a = StreamingPolicy::new(model.clone(), &device).unwrap();
             let mut b = StreamingPolicy::new(model, &device).unwrap();
             let mut last_a = None;
@@ -616,10 +609,10 @@ mod tests {
             let x = batch(&cfg, 2, 8, &device);
             let sub = x.subgoal.clone();
             let long = model
-                .predict(x.images.clone(), x.instruction.clone(), sub.clone())
+                .predict(x.obs.pixels().unwrap(), x.instruction.clone(), sub.clone())
                 .unwrap()
                 .actions;
-            let half = |i: usize| x.images.clone().narrow(1, 4 * i, 4);
+            let half = |i: usize| x.obs.pixels().unwrap().narrow(1, 4 * i, 4);
             let sub_half = |i: usize| sub.clone().map(|s| s.narrow(1, 4 * i, 4));
             let (first, carry) = model
                 .predict_from(
@@ -742,7 +735,7 @@ mod tests {
         let loaded = PolicyModel::load(&cfg, &path, &device).unwrap();
         let x = batch(&cfg, 1, 2, &device);
         let run = |m: &PolicyModel| {
-            m.predict(x.images.clone(), x.instruction.clone(), None)
+            m.predict(x.obs.pixels().unwrap(), x.instruction.clone(), None)
                 .unwrap()
                 .actions
         };
@@ -814,8 +807,9 @@ mod tests {
         let mut err = 0.0;
         for t in 0..4 {
             let img = x
-                .images
-                .clone()
+                .obs
+                .pixels()
+                .unwrap()
                 .narrow(0, 0, 1)
                 .narrow(1, t, 1)
                 .squeeze_dim::<4>(1);

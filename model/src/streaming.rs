@@ -6,6 +6,7 @@
 use burn::prelude::*;
 
 use crate::config::Variant;
+use crate::encoder::Frames;
 use crate::error::{ModelError, Result};
 use crate::io::StepInput;
 use crate::policy::PolicyModel;
@@ -85,7 +86,7 @@ impl StreamingPolicy {
     /// Call it at every environment step (also while executing an earlier chunk open-loop):
     /// the slots and SSM state must see every frame, as in training.
     pub fn act_input(&mut self, input: StepInput) -> Result<Vec<Vec<f32>>> {
-        let chunk = self.act_tensor(input.image, input.instruction, input.subgoal)?;
+        let chunk = self.act_frames(input.obs, input.instruction, input.subgoal)?;
         let [h, a] = chunk.dims();
         let data = chunk
             .into_data()
@@ -97,7 +98,7 @@ impl StreamingPolicy {
     /// Updates the memory with a frame without decoding actions (e.g. while executing an earlier
     /// chunk open-loop): cheaper than [`StreamingPolicy::act_input`], same state afterwards.
     pub fn observe_input(&mut self, input: StepInput) -> Result<()> {
-        self.observe_tensor(input.image, input.subgoal)
+        self.advance(input.obs, input.subgoal).map(|_| ())
     }
 
     /// [`StreamingPolicy::observe_input`] on tensors.
@@ -109,7 +110,8 @@ impl StreamingPolicy {
         image: Tensor<4>,
         subgoal: Option<Tensor<3, Int>>,
     ) -> Result<()> {
-        self.advance(image, subgoal).map(|_| ())
+        self.advance(Frames::Pixels(image.unsqueeze_dim(1)), subgoal)
+            .map(|_| ())
     }
 
     /// One step on tensors (normalised actions).
@@ -123,7 +125,21 @@ impl StreamingPolicy {
         instruction: Tensor<2, Int>,
         subgoal: Option<Tensor<3, Int>>,
     ) -> Result<Tensor<2>> {
-        let visual = self.advance(image, subgoal)?;
+        self.act_frames(Frames::Pixels(image.unsqueeze_dim(1)), instruction, subgoal)
+    }
+
+    /// One step on an observation of one frame (pixels or state; normalised actions).
+    ///
+    /// # Shapes
+    /// - obs: `[1, 1, …]` (see [`Frames`]); instruction: `[1, L_txt]`; subgoal: `[1, G, L_sg]`
+    /// - output: `[H_a, A]`
+    pub fn act_frames(
+        &mut self,
+        obs: Frames,
+        instruction: Tensor<2, Int>,
+        subgoal: Option<Tensor<3, Int>>,
+    ) -> Result<Tensor<2>> {
+        let visual = self.advance(obs, subgoal)?;
         let out = self.model.decode(visual, None, instruction);
         let [_, ha, a] = out.actions.dims();
         Ok(out.actions.reshape([ha, a]))
@@ -132,19 +148,17 @@ impl StreamingPolicy {
     /// Runs everything but the decoder on one frame and updates the carried state.
     ///
     /// # Shapes
-    /// - image: `[1, 3, H, W]`; subgoal: `[1, G, L_sg]`
+    /// - obs: `[1, 1, …]` (see [`Frames`]); subgoal: `[1, G, L_sg]`
     /// - output: the decoder's visual tokens `[1, V, D_dec]` (history included)
-    fn advance(&mut self, image: Tensor<4>, subgoal: Option<Tensor<3, Int>>) -> Result<Tensor<3>> {
+    fn advance(&mut self, obs: Frames, subgoal: Option<Tensor<3, Int>>) -> Result<Tensor<3>> {
         let m = &self.model;
-        let cfg = &m.config;
-        let [h, w] = cfg.image_size;
-        if image.dims() != [1, 3, h, w] {
+        if obs.batch_time() != [1, 1] {
             return Err(ModelError::Input(format!(
-                "image {:?}, expected [1, 3, {h}, {w}]",
-                image.dims()
+                "a streamed step is one frame of one episode, got [B, T] = {:?}",
+                obs.batch_time()
             )));
         }
-        let feats = m.encoder.forward_frames(image); // [1, M, D_f]
+        let feats = m.encoder.forward(obs)?.squeeze_dim::<3>(1); // [1, M, D_f]
         let (token_type, text) = m.shared();
         let shared = Shared {
             token_type: &token_type,
@@ -207,8 +221,10 @@ mod tests {
             ..Default::default()
         };
         let obs = StepObservation {
-            agentview: &frame,
+            agentview: Some(&frame),
             state: [0.0; 8],
+            objects: &[],
+            seed: 0,
             instruction: "put the bowl on the plate",
             goal: Some(&goal),
         };

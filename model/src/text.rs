@@ -1,7 +1,8 @@
 //! Language: learned word embeddings over the task vocabulary (model.md §8); the ids come from
 //! [`crate::io::Tokenizer`] (0 = padding, 1 = unknown word, word i of the vocabulary = i + 2).
-//! The instruction gives the decoder's language tokens; a subgoal text is mean-pooled into one
-//! embedding g.
+//! The instruction gives the decoder's language tokens; a subgoal text is read as its ordered
+//! token sequence ([`TextEncoder::sequence`]), so word order matters ("bowl 2 on plate 1" ≠
+//! "bowl 1 on plate 2").
 
 use burn::module::Param;
 use burn::nn::{Embedding, EmbeddingConfig};
@@ -17,7 +18,7 @@ pub const PAD: i64 = data::text::PAD as i64;
 pub struct TextEncoder {
     /// Word embeddings `[V, D_txt]`.
     pub embed: Embedding,
-    /// Positions `[max_len, D_txt]` (used for the token sequence, not the pooled vector).
+    /// Positions `[max_len, D_txt]`.
     pub pos: Param<Tensor<2>>,
 }
 
@@ -48,19 +49,21 @@ impl TextEncoder {
         (x, pad)
     }
 
-    /// Mean of the word embeddings of the non-padding tokens (zeros for an empty text).
+    /// The ordered token sequence of a text, flattened: word + position embedding per token,
+    /// zeros at padding (an empty text is all zeros).
     ///
     /// # Shapes
-    /// - ids: `[N, L]` → `[N, D_txt]`
-    pub fn pooled(&self, ids: Tensor<2, Int>) -> Tensor<2> {
+    /// - ids: `[N, L]` → `[N, L · D_txt]`
+    pub fn sequence(&self, ids: Tensor<2, Int>) -> Tensor<2> {
+        let [n, l] = ids.dims();
         let keep = ids
             .clone()
             .not_equal_elem(PAD)
             .float()
             .unsqueeze_dim::<3>(2); // [N, L, 1]
-        let x = self.embed.forward(ids) * keep.clone();
-        let count = keep.sum_dim(1).clamp_min(1.0); // [N, 1, 1]
-        (x.sum_dim(1) / count).squeeze_dim::<2>(1)
+        let (x, _) = self.tokens(ids);
+        let [_, _, d] = x.dims();
+        (x * keep).reshape([n, l * d])
     }
 }
 
@@ -72,7 +75,7 @@ mod tests {
     use crate::test_device;
 
     #[test]
-    fn encoder_shapes_mask_and_pooling() {
+    fn encoder_shapes_mask_and_ordered_sequence() {
         let (_guard, device) = test_device();
         let tok = Tokenizer::new(&cfg());
         let enc = TextEncoder::new(&cfg(), 4, &device);
@@ -81,18 +84,30 @@ mod tests {
         assert_eq!(x.dims(), [2, 6, 4]);
         let pad = pad.into_data().try_to_vec::<bool>().unwrap();
         assert_eq!(&pad[..6], &[false, false, false, true, true, true]);
-        let pooled = enc.pooled(ids);
-        assert_eq!(pooled.dims(), [2, 4]);
-        // Pooled = mean of the three word embeddings; the empty text pools to zeros.
-        let w = enc.embed.weight.val();
-        let want = (w.clone().narrow(0, 5, 1) + w.clone().narrow(0, 6, 1) + w.narrow(0, 2, 1))
-            .div_scalar(3.0);
-        let diff: f32 = (pooled.clone().narrow(0, 0, 1) - want)
+        let seq = enc.sequence(ids.clone());
+        assert_eq!(seq.dims(), [2, 24]);
+        // Token i of the text = word i + position i; padding and the empty text are zeros.
+        let (x, _) = enc.tokens(ids);
+        let want = x.narrow(0, 0, 1).narrow(1, 0, 3).reshape([1, 12]);
+        let diff: f32 = (seq.clone().narrow(0, 0, 1).narrow(1, 0, 12) - want)
             .abs()
             .max()
             .into_scalar();
         assert!(diff < 1e-6);
-        let empty: f32 = pooled.narrow(0, 1, 1).abs().max().into_scalar();
+        let rest: f32 = seq
+            .clone()
+            .narrow(0, 0, 1)
+            .narrow(1, 12, 12)
+            .abs()
+            .max()
+            .into_scalar();
+        assert_eq!(rest, 0.0);
+        let empty: f32 = seq.narrow(0, 1, 1).abs().max().into_scalar();
         assert_eq!(empty, 0.0);
+        // Word order matters: the same words in another order give another sequence.
+        let a = enc.sequence(tok.encode_batch(&["bowl on plate"], &device));
+        let b = enc.sequence(tok.encode_batch(&["plate on bowl"], &device));
+        let d: f32 = (a - b).abs().max().into_scalar();
+        assert!(d > 1e-4);
     }
 }

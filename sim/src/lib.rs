@@ -29,7 +29,7 @@ pub mod task;
 pub mod tools;
 pub mod world;
 
-pub use collect::{aliasing, generate, record};
+pub use collect::{aliasing, generate, labels, record};
 pub use engine::{mujoco, render};
 pub use tools::{bench, sheet};
 pub use world::env::{Env, EnvConfig, EnvError, GoalStatus, ObjectState, Observation};

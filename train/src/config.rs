@@ -132,12 +132,34 @@ pub enum Preset {
 pub struct ModelSection {
     /// Variant name (`e_slotssm`, `e_slotssm_oracle`, `slotvla_h<N>`, `dense`, `dense_h<N>`).
     pub variant: String,
+    /// What the policy observes: `pixels` (the agentview camera) or `state` (the simulator's
+    /// object poses and grasps, one token per object; needs episodes with object poses).
+    #[serde(default, skip_serializing_if = "ObsMode::is_pixels")]
+    pub obs: ObsMode,
     /// Size preset.
     #[serde(default = "tiny")]
     pub preset: Preset,
     /// Fields of `model::ModelConfig` replacing the preset's (nested tables merge key by key).
     #[serde(default, skip_serializing_if = "toml::Table::is_empty")]
     pub overrides: toml::Table,
+}
+
+/// `[model].obs`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum ObsMode {
+    /// The agentview camera.
+    #[default]
+    Pixels,
+    /// The object state.
+    State,
+}
+
+impl ObsMode {
+    /// Whether it is `pixels` (the default).
+    pub fn is_pixels(&self) -> bool {
+        *self == ObsMode::Pixels
+    }
 }
 
 fn tiny() -> Preset {

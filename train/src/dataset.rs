@@ -11,6 +11,7 @@ use data::{DatasetIndex, Split, WindowConfig, WindowDataset};
 #[cfg(feature = "generate")]
 use indicatif::{ProgressBar, ProgressStyle};
 use model::Processor;
+use model::io::state::StateSpec;
 use rand::SeedableRng;
 use rand::seq::SliceRandom;
 use rand_chacha::ChaCha8Rng;
@@ -123,8 +124,13 @@ pub struct RunData {
 }
 
 impl RunData {
-    /// Opens `[data].dir` for a model of `model` (image size, text length).
-    pub fn open(cfg: &Config, model: &model::ModelConfig) -> Result<Self> {
+    /// Opens `[data].dir` for a model of `model` (image size, text length; in state mode the
+    /// object-state spec it was built for, see [`state_spec`]).
+    pub fn open(
+        cfg: &Config,
+        model: &model::ModelConfig,
+        state: Option<StateSpec>,
+    ) -> Result<Self> {
         let dir = &cfg.data.dir;
         let index = DatasetIndex::load(dir)?;
         let [h, w] = model.image_size;
@@ -140,6 +146,7 @@ impl RunData {
             chunk: model.decoder.horizon,
             image_size: h as u32,
             wrist: false,
+            images: !model.observation.is_state(),
             augment: cfg.data.augment.then(data::Augment::default),
             seed: cfg.train.seed,
         };
@@ -159,7 +166,10 @@ impl RunData {
         } else {
             Some(WindowDataset::from_index(dir, &index, Split::Val, val_win)?)
         };
-        let processor = Processor::new(model, train.action_norm().clone());
+        let processor = match state {
+            None => Processor::new(model, train.action_norm().clone()),
+            Some(spec) => Processor::with_state(model, train.action_norm().clone(), spec)?,
+        };
         Ok(RunData {
             index,
             train,
@@ -413,4 +423,52 @@ mod tests {
             );
         }
     }
+}
+
+/// The object-state spec of a dataset (state mode): the categories of every object of every
+/// episode and the most objects in one scene. Every episode must have been recorded with object
+/// poses (episode schema 2); the first that was not is named in the error.
+pub fn state_spec(dir: &Path, index: &DatasetIndex) -> Result<StateSpec> {
+    let mut names: Vec<String> = Vec::new();
+    let mut most = 0;
+    for e in &index.episodes {
+        let path = dir.join(&e.file);
+        let r = data::EpisodeReader::open(&path)?;
+        let first = r.read_raw_steps(0..1.min(r.len()))?;
+        let objects = first.first().map(|s| s.objects.as_slice()).unwrap_or(&[]);
+        if objects.is_empty() || objects.iter().any(|o| o.pose.is_none()) {
+            return Err(TrainError::Usage(format!(
+                "{}: `obs = \"state\"` needs object poses in /objects, and this episode was \
+                 recorded without them (re-generate it with this version's `sim generate`)",
+                path.display()
+            )));
+        }
+        most = most.max(objects.len());
+        names.extend(objects.iter().map(|o| o.name.clone()));
+    }
+    Ok(StateSpec::from_names(
+        names.iter().map(String::as_str),
+        most,
+    ))
+}
+
+/// Checks that every episode of the dataset records goal progress (`/goal`), which an oracle
+/// variant reads; the first that does not is named in the error.
+pub fn check_goals(dir: &Path, index: &DatasetIndex) -> Result<()> {
+    for e in &index.episodes {
+        let path = dir.join(&e.file);
+        let r = data::EpisodeReader::open(&path)?;
+        if !r
+            .channels()
+            .iter()
+            .any(|c| c.topic == "/goal" && c.count > 0)
+        {
+            return Err(TrainError::Usage(format!(
+                "{}: the oracle variant reads the goal progress, and this episode has no /goal \
+                 channel",
+                path.display()
+            )));
+        }
+    }
+    Ok(())
 }

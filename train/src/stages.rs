@@ -102,8 +102,10 @@ struct Freeze<'a> {
 
 impl ModuleVisitor for Freeze<'_> {
     fn enter_module(&mut self, name: &str, _container_type: &str) {
-        self.path.push(name.to_string());
-        self.seen.insert(name.to_string());
+        // Enum arms (`SlotAttention`) are named as fields are (`slot_attention`).
+        let name = snake_case(name);
+        self.path.push(name.clone());
+        self.seen.insert(name);
     }
 
     fn exit_module(&mut self, _name: &str, _container_type: &str) {
@@ -117,6 +119,22 @@ impl ModuleVisitor for Freeze<'_> {
             grads.remove::<D>(param.id);
         }
     }
+}
+
+/// `CamelCase` → `camel_case` (other names unchanged).
+pub fn snake_case(name: &str) -> String {
+    let mut out = String::with_capacity(name.len() + 4);
+    for (i, c) in name.chars().enumerate() {
+        if c.is_uppercase() {
+            if i > 0 {
+                out.push('_');
+            }
+            out.extend(c.to_lowercase());
+        } else {
+            out.push(c);
+        }
+    }
+    out
 }
 
 /// The names of the model's parts (every module and parameter name in its tree) that a stage
@@ -256,7 +274,13 @@ mod tests {
         let mut grads = GradientsParams::from_grads(grads, &m);
         let before = grads.len();
         freeze(&m, &frozen, &mut grads);
-        let sa = m.tokens.slot_core().unwrap().slot_attention.num_params();
+        let sa = m
+            .tokens
+            .slot_core()
+            .unwrap()
+            .slot_attention()
+            .unwrap()
+            .num_params();
         assert!(grads.len() < before);
         // Every parameter tensor under slot_attention and the frame offsets is gone, no other.
         struct Count(usize);
@@ -266,7 +290,12 @@ mod tests {
             }
         }
         let mut c = Count(0);
-        m.tokens.slot_core().unwrap().slot_attention.visit(&mut c);
+        m.tokens
+            .slot_core()
+            .unwrap()
+            .slot_attention()
+            .unwrap()
+            .visit(&mut c);
         assert_eq!(before - grads.len(), c.0 + 1, "{sa} params");
     }
 }

@@ -23,7 +23,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::checkpoint::{self, STATE_FORMAT, TrainState};
 use crate::clip::clip_global_norm;
-use crate::config::{BackendKind, Config, Sampling};
+use crate::config::{BackendKind, Config, ObsMode, Sampling};
 use crate::dataset::{EpisodeSampler, RunData, Sampler, ensure_dataset};
 use crate::error::{Result, TrainError};
 use crate::metrics::{self, JsonlWriter, Record};
@@ -238,8 +238,21 @@ pub fn train(cfg: &Config, opts: &TrainOptions) -> Result<TrainSummary> {
     ensure_dataset(&cfg, opts.progress)?;
     let index = data::DatasetIndex::load(&cfg.data.dir)?;
     let vocab = RunData::model_vocab(&index)?;
-    let mcfg: ModelConfig = cfg.model_config(vocab).map_err(|m| config_error(&cfg, m))?;
-    let data = RunData::open(&cfg, &mcfg)?;
+    let mut mcfg: ModelConfig = cfg.model_config(vocab).map_err(|m| config_error(&cfg, m))?;
+    if mcfg.variant.needs_subgoal_text() {
+        crate::dataset::check_goals(&cfg.data.dir, &index)?;
+    }
+    let state = match cfg.model.obs {
+        ObsMode::Pixels => None,
+        ObsMode::State => {
+            let spec = crate::dataset::state_spec(&cfg.data.dir, &index)?;
+            mcfg = mcfg.with_state(spec.tokens(), spec.num_categories());
+            mcfg.validate()
+                .map_err(|e| config_error(&cfg, e.to_string()))?;
+            Some(spec)
+        }
+    };
+    let data = RunData::open(&cfg, &mcfg, state)?;
 
     std::fs::create_dir_all(&run).map_err(|e| TrainError::io(&run, e))?;
     checkpoint::clean_temporaries(&run)?;

@@ -408,7 +408,11 @@ fn part_bits(model: &PolicyModel, part: &str) -> Vec<Vec<u32>> {
             self.path.pop();
         }
         fn visit_float<const D: usize>(&mut self, p: &Param<Tensor<D>>) {
-            if self.path.iter().any(|n| n == self.part) {
+            if self
+                .path
+                .iter()
+                .any(|n| train::stages::snake_case(n) == self.part)
+            {
                 let v = p.val().into_data().try_to_vec::<f32>().unwrap();
                 self.bits.push(v.iter().map(|x| x.to_bits()).collect());
             }

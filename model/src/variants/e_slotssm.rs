@@ -3,6 +3,7 @@
 //! (constant size for any episode length) and the last slots.
 
 use burn::module::Param;
+use burn::nn::{Linear, LinearConfig};
 use burn::prelude::*;
 use burn::tensor::Distribution;
 
@@ -12,6 +13,15 @@ use crate::config::ModelConfig;
 use crate::error::{ModelError, Result};
 use crate::heads::{SlotFusion, WindowHead};
 use crate::slot_ssm::{SlotSsm, SlotSsmState};
+
+/// The subgoal g given to every slot's fusion.
+#[derive(Module, Debug)]
+pub enum SubgoalReader {
+    /// A learned null subgoal `[D_txt]` for every slot (no oracle text).
+    Null(Param<Tensor<1>>),
+    /// The oracle text as an ordered token sequence, projected `[L_sg · D_txt, D_txt]`.
+    Text(Linear),
+}
 
 /// Embodied-SlotSSM's token builder.
 #[derive(Module, Debug)]
@@ -24,9 +34,8 @@ pub struct SlotSsmTokens {
     pub window_head: WindowHead,
     /// Slot fusion of s_t, ŝ_{t+1} and the subgoal.
     pub fusion: SlotFusion,
-    /// Learned null subgoal `[D_txt]`, given to every slot when the model reads no oracle
-    /// subgoal text (absent when it does).
-    pub null_subgoal: Option<Param<Tensor<1>>>,
+    /// How the subgoal g of each slot is formed.
+    pub subgoal: SubgoalReader,
     /// Cross-attention from slots to patches inside the SlotSSM.
     pub cross_attention: bool,
 }
@@ -41,9 +50,15 @@ impl SlotSsmTokens {
             slot_ssm: SlotSsm::new(config, device),
             window_head: WindowHead::new(d, config.window.past + config.window.future, device),
             fusion: SlotFusion::new(d, w, device),
-            null_subgoal: (!config.variant.needs_subgoal_text()).then(|| {
-                Param::from_tensor(Tensor::random([w], Distribution::Normal(0.0, 1.0), device))
-            }),
+            subgoal: if config.variant.needs_subgoal_text() {
+                SubgoalReader::Text(LinearConfig::new(config.text.max_len * w, w).init(device))
+            } else {
+                SubgoalReader::Null(Param::from_tensor(Tensor::random(
+                    [w],
+                    Distribution::Normal(0.0, 1.0),
+                    device,
+                )))
+            },
             cross_attention: config.ssm.cross_attention,
         }
     }
@@ -60,15 +75,15 @@ impl SlotSsmTokens {
         shared: Shared,
         device: &Device,
     ) -> Result<Tensor<3>> {
-        let k = self.core.slot_attention.num_slots();
+        let k = self.core.num_slots();
         let [_, w] = shared.token_type.dims();
-        match (subgoal, &self.null_subgoal) {
-            (_, Some(null)) => Ok(null
+        match (subgoal, &self.subgoal) {
+            (_, SubgoalReader::Null(null)) => Ok(null
                 .val()
                 .reshape([1, 1, w])
                 .repeat_dim(0, n)
                 .repeat_dim(1, k)),
-            (Some(ids), None) => {
+            (Some(ids), SubgoalReader::Text(proj)) => {
                 let [n2, g, l] = ids.dims();
                 if n2 != n || (g != 1 && g != k) {
                     return Err(ModelError::Input(format!(
@@ -76,19 +91,18 @@ impl SlotSsmTokens {
                         ids.dims()
                     )));
                 }
-                let e = shared
-                    .text
-                    .pooled(ids.reshape([n * g, l]))
+                let e = proj
+                    .forward(shared.text.sequence(ids.reshape([n * g, l])))
                     .reshape([n, g, w]);
                 Ok(if g == 1 { e.repeat_dim(1, k) } else { e })
             }
             // Oracle model without a subgoal: every slot gets the empty text (zeros).
-            (None, None) => Ok(Tensor::zeros([n, k, w], device)),
+            (None, SubgoalReader::Text(_)) => Ok(Tensor::zeros([n, k, w], device)),
         }
     }
 
     fn check_state(&self, state: &SlotSsmState, b: usize, device: &Device) -> Result<()> {
-        let k = self.core.slot_attention.num_slots();
+        let k = self.core.num_slots();
         let want = self.slot_ssm.zero_state(b, k, device);
         let ok = state.blocks.len() == want.blocks.len()
             && state
@@ -171,7 +185,7 @@ impl SlotSsmTokens {
     ) -> Result<Tensor<3>> {
         let device = feats.device();
         let slots = self.core.step(feats.clone(), memory);
-        let k = self.core.slot_attention.num_slots();
+        let k = self.core.num_slots();
         let state = memory
             .ssm
             .take()

@@ -18,7 +18,7 @@ use burn::prelude::*;
 pub use dense::DenseTokens;
 pub use e_slotssm::SlotSsmTokens;
 pub use history::History;
-pub use slots::SlotCore;
+pub use slots::{ObjectSlots, SlotCore, SlotSource};
 pub use slotvla::SlotVlaTokens;
 pub use types::{Carry, CarryRecord, Memory, Shared, TensorRecord, WindowParts, WindowTokens};
 

@@ -1,6 +1,7 @@
-//! What every slot variant shares (model.md §2, §7, L_sa): slot attention with temporally
-//! propagated initialisation, the relation encoder, the projection of slot and relation tokens
-//! to the decoder width, and the optional slot decoder of L_sa.
+//! What every slot variant shares (model.md §2, §7, L_sa): the slots — slot attention with
+//! temporally propagated initialisation, or in state mode the object tokens themselves ("oracle
+//! slots") —, the relation encoder, the projection of slot and relation tokens to the decoder
+//! width, and the optional slot decoder of L_sa.
 
 use burn::nn::{Linear, LinearConfig};
 use burn::prelude::*;
@@ -12,11 +13,48 @@ use crate::heads::SlotDecoder;
 use crate::relation::RelationEncoder;
 use crate::slot_attention::SlotAttention;
 
-/// Slot attention, relation tokens and their projection to the decoder.
+/// Where the slots come from.
+// One per model (the arms differ in size, as the token builders do).
+#[allow(clippy::large_enum_variant)]
+#[derive(Module, Debug)]
+pub enum SlotSource {
+    /// Slot attention over the image features (pixels).
+    SlotAttention(SlotAttention),
+    /// One slot per object token (state mode): the tokens projected to the slot width.
+    ObjectSlots(ObjectSlots),
+}
+
+/// Oracle slots: slot k of a frame is token k of the state encoder, projected `[D_f, D]`.
+/// Token k is the same object through an episode, as a tracked slot is.
+#[derive(Module, Debug)]
+pub struct ObjectSlots {
+    /// Projection `[D_f, D]`.
+    pub proj: Linear,
+    /// Slots (= tokens) per frame K.
+    pub slots: usize,
+}
+
+impl ObjectSlots {
+    /// Slots and their (one-hot) masks of a window.
+    ///
+    /// # Shapes
+    /// - feats: `[B, T, K, D_f]`; output: slots `[B, T, K, D]`, masks `[B, T, K, K]`
+    fn forward(&self, feats: Tensor<4>) -> (Tensor<4>, Tensor<4>) {
+        let [b, t, k, _] = feats.dims();
+        let device = feats.device();
+        let eye = Tensor::<2>::eye(k, &device)
+            .reshape([1, 1, k, k])
+            .repeat_dim(0, b)
+            .repeat_dim(1, t);
+        (self.proj.forward(feats), eye)
+    }
+}
+
+/// Slots, relation tokens and their projection to the decoder.
 #[derive(Module, Debug)]
 pub struct SlotCore {
-    /// Slot attention.
-    pub slot_attention: SlotAttention,
+    /// Where the slots come from.
+    pub source: SlotSource,
     /// Relation encoder.
     pub relation: RelationEncoder,
     /// Slot / relation tokens to the decoder width `[D, D_dec]`.
@@ -29,7 +67,15 @@ impl SlotCore {
     /// Builds the slot machinery of `config`.
     pub fn new(config: &ModelConfig, device: &Device) -> Self {
         SlotCore {
-            slot_attention: SlotAttention::new(config, device),
+            source: if config.observation.is_state() {
+                SlotSource::ObjectSlots(ObjectSlots {
+                    proj: LinearConfig::new(config.encoder.feature_dim, config.slots.dim)
+                        .init(device),
+                    slots: config.slots.num_slots,
+                })
+            } else {
+                SlotSource::SlotAttention(SlotAttention::new(config, device))
+            },
             relation: RelationEncoder::new(config, device),
             token_proj: LinearConfig::new(config.slots.dim, config.decoder.width).init(device),
             slot_decoder: config.has_sa_decoder().then(|| {
@@ -41,6 +87,30 @@ impl SlotCore {
                     device,
                 )
             }),
+        }
+    }
+
+    /// Slots per frame K.
+    pub fn num_slots(&self) -> usize {
+        match &self.source {
+            SlotSource::SlotAttention(sa) => sa.num_slots(),
+            SlotSource::ObjectSlots(o) => o.slots,
+        }
+    }
+
+    /// Slot width D.
+    pub fn dim(&self) -> usize {
+        match &self.source {
+            SlotSource::SlotAttention(sa) => sa.dim(),
+            SlotSource::ObjectSlots(o) => o.proj.weight.dims()[1],
+        }
+    }
+
+    /// Slot attention (None for oracle slots).
+    pub fn slot_attention(&self) -> Option<&SlotAttention> {
+        match &self.source {
+            SlotSource::SlotAttention(sa) => Some(sa),
+            SlotSource::ObjectSlots(_) => None,
         }
     }
 
@@ -57,7 +127,25 @@ impl SlotCore {
         fresh: Option<Tensor<1, Bool>>,
     ) -> Result<(Tensor<4>, Tensor<4>, Tensor<3>)> {
         let [b, t, _, _] = feats.dims();
-        let (k, d) = (self.slot_attention.num_slots(), self.slot_attention.dim());
+        let (k, d) = (self.num_slots(), self.dim());
+        let sa = match &self.source {
+            SlotSource::SlotAttention(sa) => sa,
+            SlotSource::ObjectSlots(o) => {
+                let [_, _, n, _] = feats.dims();
+                if n != k {
+                    return Err(ModelError::Input(format!(
+                        "{n} object tokens per frame, expected {k}"
+                    )));
+                }
+                let (slots, masks) = o.forward(feats);
+                let last = slots
+                    .clone()
+                    .narrow(1, t - 1, 1)
+                    .squeeze_dim::<3>(1)
+                    .detach();
+                return Ok((slots, masks, last));
+            }
+        };
         if let Some(p) = &prev
             && p.dims() != [b, k, d]
         {
@@ -72,8 +160,8 @@ impl SlotCore {
                 // per lane; the rest of the window continues from the chosen slots.
                 let [_, _, m, _] = feats.dims();
                 let f0 = feats.clone().narrow(1, 0, 1).squeeze_dim::<3>(1);
-                let (s_new, a_new) = self.slot_attention.step(f0.clone(), None);
-                let (s_old, a_old) = self.slot_attention.step(f0, Some(p));
+                let (s_new, a_new) = sa.step(f0.clone(), None);
+                let (s_old, a_old) = sa.step(f0, Some(p));
                 let lane = |w: usize| {
                     fresh
                         .clone()
@@ -86,16 +174,14 @@ impl SlotCore {
                 if t == 1 {
                     (s0.unsqueeze_dim(1), a0.unsqueeze_dim(1))
                 } else {
-                    let (s, a) = self
-                        .slot_attention
-                        .forward(feats.narrow(1, 1, t - 1), Some(s0.clone()));
+                    let (s, a) = sa.forward(feats.narrow(1, 1, t - 1), Some(s0.clone()));
                     (
                         Tensor::cat(vec![s0.unsqueeze_dim(1), s], 1),
                         Tensor::cat(vec![a0.unsqueeze_dim(1), a], 1),
                     )
                 }
             }
-            (prev, _) => self.slot_attention.forward(feats, prev),
+            (prev, _) => sa.forward(feats, prev),
         };
         let last = slots
             .clone()
@@ -111,7 +197,13 @@ impl SlotCore {
     /// # Shapes
     /// - feats: `[1, M, D_f]`; output: slots `[1, K, D]`
     pub fn step(&self, feats: Tensor<3>, memory: &mut Memory) -> Tensor<3> {
-        let (slots, masks) = self.slot_attention.step(feats, memory.slots.take());
+        let (slots, masks) = match &self.source {
+            SlotSource::SlotAttention(sa) => sa.step(feats, memory.slots.take()),
+            SlotSource::ObjectSlots(o) => {
+                let (s, m) = o.forward(feats.unsqueeze_dim(1));
+                (s.squeeze_dim::<3>(1), m.squeeze_dim::<3>(1))
+            }
+        };
         memory.slots = Some(slots.clone());
         memory.masks = Some(masks);
         slots

@@ -13,12 +13,10 @@ use data::{
     StepRecord, WriterOptions,
 };
 
-use crate::engine::mujoco::ObjType;
+use super::labels::LabelTracker;
+pub use super::labels::TOUCH_THRESHOLD;
 use crate::task::TaskSpec;
 use crate::world::env::{Env, Observation};
-
-/// Contacts (summed over control steps) after which a touched object receives the next subgoal label.
-pub const TOUCH_THRESHOLD: u32 = 20;
 
 /// Version string stored in every episode's metadata.
 pub const SIM_VERSION: &str = concat!(
@@ -43,10 +41,7 @@ pub enum RecordError {
 /// Writes one episode step by step.
 pub struct Recorder {
     writer: EpisodeWriter,
-    labels: Vec<String>,
-    touches: Vec<u32>,
-    finger_geoms: Vec<usize>,
-    satisfied_seen: usize,
+    labels: LabelTracker,
     step: u64,
 }
 
@@ -68,14 +63,8 @@ impl Recorder {
                 "the environment must render with segmentation on".into(),
             ));
         }
-        let model = env.model();
-        let finger_geoms = (0..model.ngeom())
-            .filter(|&g| {
-                model
-                    .name(ObjType::Geom, g)
-                    .is_some_and(|n| n.starts_with("gripper0_finger"))
-            })
-            .collect();
+        let labels = LabelTracker::new(env)
+            .ok_or_else(|| RecordError::Setup("the environment has no task scene".into()))?;
         let mut meta = EpisodeMeta {
             task_id: task.id.clone(),
             instruction: task.instruction.clone(),
@@ -100,10 +89,7 @@ impl Recorder {
         );
         Ok(Recorder {
             writer: EpisodeWriter::create(path, meta, opts)?,
-            labels: vec!["0".into(); scene.instances.len()],
-            touches: vec![0; scene.instances.len()],
-            finger_geoms,
-            satisfied_seen: 0,
+            labels,
             step: 0,
         })
     }
@@ -121,33 +107,8 @@ impl Recorder {
             .scene()
             .ok_or_else(|| RecordError::Setup("no task scene".into()))?;
         // Finger contacts during this step (counted on the state after it, once per control step).
-        for c in env.data().contacts() {
-            let other = if self.finger_geoms.contains(&c.geom1) {
-                c.geom2
-            } else if self.finger_geoms.contains(&c.geom2) {
-                c.geom1
-            } else {
-                continue;
-            };
-            if let Some(i) = scene
-                .instances
-                .iter()
-                .position(|inst| inst.geoms.contains(&other))
-            {
-                self.touches[i] += 1;
-            }
-        }
+        self.labels.update(env, next.goal.as_ref());
         let goal = next.goal.clone().unwrap_or_default();
-        if goal.satisfied > self.satisfied_seen {
-            let text = goal.satisfied_texts.last().cloned().unwrap_or_default();
-            for (label, t) in self.labels.iter_mut().zip(&self.touches) {
-                if *t > TOUCH_THRESHOLD {
-                    *label = text.clone();
-                }
-            }
-            self.touches.iter_mut().for_each(|t| *t = 0);
-            self.satisfied_seen = goal.satisfied;
-        }
 
         let s = obs.image_size as u32;
         let rgb = |v: &[u8]| -> Result<RgbImage, RecordError> {
@@ -182,7 +143,7 @@ impl Recorder {
                 }
             })
             .collect();
-        let mut objects = annotations(scene, &ids, s as usize, &self.labels);
+        let mut objects = annotations(scene, &ids, s as usize, self.labels.labels());
         for (o, st) in objects.iter_mut().zip(&obs.objects) {
             o.pose = Some(st.pose());
             o.grasped = Some(st.grasped);

@@ -8,13 +8,17 @@
 //! prepare frames with `data::window::frame_chw` and read the goal as the policy observes it
 //! (`data::window::observed_progress`), so train and eval cannot disagree about an input.
 
+pub mod state;
+
 use burn::prelude::*;
-use data::{ActionNorm, GoalProgress, RgbImage, Vocab, WindowSample};
+use data::{ActionNorm, GoalProgress, ObjectAnnotation, RgbImage, Vocab, WindowSample};
 use serde::{Deserialize, Serialize};
 
-use crate::config::{ModelConfig, TextConfig};
+use crate::config::{ModelConfig, Observation, TextConfig};
+use crate::encoder::Frames;
 use crate::error::{ModelError, Result};
 use crate::policy::WindowBatch;
+use state::{FEATURES, StateSpec};
 
 /// Format tag of `processor.json`.
 pub const PROCESSOR_FORMAT: &str = "libero-mem-rs/processor/1";
@@ -67,15 +71,19 @@ pub enum SubgoalInput {
     None,
     /// The pending subgoal's text, shared by every slot.
     Pending,
+    /// The reference's oracle labels, one per slot: each object's latest satisfied subgoal with
+    /// its ordinal (`"two: bowl 1 on plate 1"`, `"0"` before any), the robot's latest overall
+    /// (state mode, where slot k is object token k).
+    PerObject,
 }
 
 impl SubgoalInput {
     /// What the variant of `model` reads.
     pub fn of(model: &ModelConfig) -> Self {
-        if model.variant.needs_subgoal_text() {
-            SubgoalInput::Pending
-        } else {
-            SubgoalInput::None
+        match (model.variant.needs_subgoal_text(), &model.observation) {
+            (false, _) => SubgoalInput::None,
+            (true, Observation::State { .. }) => SubgoalInput::PerObject,
+            (true, Observation::Pixels) => SubgoalInput::Pending,
         }
     }
 }
@@ -94,15 +102,24 @@ pub struct ProcessorConfig {
     pub action: ActionNorm,
     /// Which subgoal is fed.
     pub subgoal: SubgoalInput,
+    /// The object-state tokens (state mode only).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub state: Option<StateSpec>,
 }
 
 /// One environment step as the policy sees it.
 #[derive(Clone, Copy, Debug)]
 pub struct StepObservation<'a> {
-    /// Agentview RGB, upright, any size (resized as training frames are).
-    pub agentview: &'a RgbImage,
+    /// Agentview RGB, upright, any size (resized as training frames are); None when nothing
+    /// was rendered (state mode).
+    pub agentview: Option<&'a RgbImage>,
     /// Proprio state (eef position, axis-angle, gripper qpos).
     pub state: [f32; 8],
+    /// The objects in scene order, with poses and their oracle labels as observed at this step
+    /// (state mode).
+    pub objects: &'a [ObjectAnnotation],
+    /// The episode's seed (state mode: the order of the object tokens).
+    pub seed: u64,
     /// The task instruction.
     pub instruction: &'a str,
     /// Goal progress as the environment reports it with this observation (None: unknown).
@@ -112,11 +129,12 @@ pub struct StepObservation<'a> {
 /// Model inputs of one step.
 #[derive(Clone, Debug)]
 pub struct StepInput {
-    /// Frame `[1, 3, H, W]` in [0, 1].
-    pub image: Tensor<4>,
+    /// The observation of one frame: image `[1, 1, 3, H, W]` in [0, 1] or state tokens
+    /// `[1, 1, N, F]` / `[1, 1, N]`.
+    pub obs: Frames,
     /// Instruction ids `[1, L_txt]`.
     pub instruction: Tensor<2, Int>,
-    /// Subgoal ids `[1, 1, L_sg]` (None when the model reads none).
+    /// Subgoal ids `[1, G, L_sg]` (None when the model reads none).
     pub subgoal: Option<Tensor<3, Int>>,
 }
 
@@ -130,14 +148,33 @@ pub struct Processor {
 impl Processor {
     /// The processor of `model` with the action normalisation of its training data.
     pub fn new(model: &ModelConfig, action: ActionNorm) -> Self {
-        Processor::from_config(ProcessorConfig {
+        Processor::from_config(Self::config_of(model, action))
+            .expect("a pixel model config gives a valid processor")
+    }
+
+    fn config_of(model: &ModelConfig, action: ActionNorm) -> ProcessorConfig {
+        let subgoal = match SubgoalInput::of(model) {
+            // (a pixel processor; `with_state` sets the spec that per-object labels need)
+            SubgoalInput::PerObject if !model.observation.is_state() => SubgoalInput::Pending,
+            s => s,
+        };
+        ProcessorConfig {
             format: PROCESSOR_FORMAT.into(),
             image_size: model.image_size,
             text: model.text.clone(),
             action,
-            subgoal: SubgoalInput::of(model),
-        })
-        .expect("a model config gives a valid processor")
+            subgoal,
+            state: None,
+        }
+    }
+
+    /// The processor of a state-mode `model` over objects as `spec` describes them.
+    pub fn with_state(model: &ModelConfig, action: ActionNorm, spec: StateSpec) -> Result<Self> {
+        let mut config = Self::config_of(model, action);
+        config.state = Some(spec);
+        let p = Processor::from_config(config)?;
+        p.check_model(model)?;
+        Ok(p)
     }
 
     /// A processor from its saved config.
@@ -154,6 +191,11 @@ impl Processor {
                 "processor image_size {:?}: frames are square and non-empty",
                 config.image_size
             )));
+        }
+        if config.subgoal == SubgoalInput::PerObject && config.state.is_none() {
+            return Err(ModelError::Config(
+                "per-object oracle labels need the object-state observation".into(),
+            ));
         }
         Ok(Processor {
             tokenizer: Tokenizer::new(&config.text),
@@ -176,9 +218,31 @@ impl Processor {
         &self.config.action
     }
 
+    /// Whether the model reads the object state (no images needed).
+    pub fn reads_state(&self) -> bool {
+        self.config.state.is_some()
+    }
+
     /// Whether `model` reads inputs the way this processor prepares them.
     pub fn check_model(&self, model: &ModelConfig) -> Result<()> {
         let c = &self.config;
+        let state = c.state.as_ref().map(|s| (s.tokens(), s.num_categories()));
+        let wants = match model.observation {
+            Observation::Pixels => None,
+            Observation::State { tokens, categories } => Some((tokens, categories)),
+        };
+        if state != wants {
+            return Err(ModelError::Config(format!(
+                "the processor gives {} but the `{}` model reads {}",
+                state.map_or("pixels".into(), |(n, c)| format!(
+                    "{n} state tokens of {c} categories"
+                )),
+                model.variant.name(),
+                wants.map_or("pixels".into(), |(n, c)| format!(
+                    "{n} state tokens of {c} categories"
+                )),
+            )));
+        }
         if c.image_size != model.image_size
             || c.text != model.text
             || c.subgoal != SubgoalInput::of(model)
@@ -202,9 +266,32 @@ impl Processor {
     /// reads none; the empty text when the goal is unknown or complete).
     pub fn subgoal_text<'g>(&self, goal: Option<&'g GoalProgress>) -> Option<&'g str> {
         match self.config.subgoal {
-            SubgoalInput::None => None,
+            SubgoalInput::None | SubgoalInput::PerObject => None,
             SubgoalInput::Pending => Some(goal.map_or("", |g| g.current_subgoal.as_str())),
         }
+    }
+
+    /// The robot's oracle label at a frame whose observed goal is `goal`: the latest satisfied
+    /// subgoal with its ordinal, `"0"` before any.
+    pub fn robot_label(goal: Option<&GoalProgress>) -> &str {
+        goal.and_then(|g| g.satisfied_subgoals.last())
+            .map_or("0", String::as_str)
+    }
+
+    /// The state tokens of one frame (state mode).
+    fn state_tokens(
+        &self,
+        objects: &[ObjectAnnotation],
+        proprio: &[f32; 8],
+        goal: Option<&GoalProgress>,
+        seed: u64,
+    ) -> Result<state::StateTokens> {
+        let spec =
+            self.config.state.as_ref().ok_or_else(|| {
+                ModelError::Input("the processor has no object-state spec".into())
+            })?;
+        let order = state::order(seed, objects.len());
+        state::tokens(spec, objects, proprio, Self::robot_label(goal), &order)
     }
 
     /// An upright frame as model input `[3, H, W]` (values in [0, 1]).
@@ -229,19 +316,38 @@ impl Processor {
     /// # Shapes
     /// - output: image `[1, 3, H, W]`, instruction `[1, L_txt]`, subgoal `[1, 1, L_sg]`
     pub fn step(&self, obs: &StepObservation, device: &Device) -> Result<StepInput> {
-        let [h, w] = self.config.image_size;
-        let image = Tensor::from_data(
-            TensorData::new(self.frame(obs.agentview)?, [1, 3, h, w]),
-            device,
-        );
         let instruction = self.tokenizer.encode_batch(&[obs.instruction], device);
+        if self.reads_state() {
+            let t = self.state_tokens(obs.objects, &obs.state, obs.goal, obs.seed)?;
+            let n = t.categories.len();
+            let subgoal = (self.config.subgoal == SubgoalInput::PerObject).then(|| {
+                let labels: Vec<&str> = t.labels.iter().map(String::as_str).collect();
+                let l = self.config.text.max_len;
+                self.tokenizer
+                    .encode_batch(&labels, device)
+                    .reshape([1, n, l])
+            });
+            return Ok(StepInput {
+                obs: Frames::State(
+                    Tensor::from_data(TensorData::new(t.features, [1, 1, n, FEATURES]), device),
+                    Tensor::from_data(TensorData::new(t.categories, [1, 1, n]), device),
+                ),
+                instruction,
+                subgoal,
+            });
+        }
+        let [h, w] = self.config.image_size;
+        let frame = obs.agentview.ok_or_else(|| {
+            ModelError::Input("the model reads pixels but no frame was rendered".into())
+        })?;
+        let image = Tensor::from_data(TensorData::new(self.frame(frame)?, [1, 1, 3, h, w]), device);
         let subgoal = self.subgoal_text(obs.goal).map(|s| {
             self.tokenizer
                 .encode_batch(&[s], device)
                 .unsqueeze_dim::<3>(1)
         });
         Ok(StepInput {
-            image,
+            obs: Frames::Pixels(image),
             instruction,
             subgoal,
         })
@@ -260,9 +366,12 @@ impl Processor {
         let (b, t) = (samples.len(), first.frame_mask.len());
         let ha = first.action_mask.len() / t.max(1);
         let [h, w] = self.config.image_size;
+        let pixels = if self.reads_state() { 0 } else { t * 3 * h * w };
         for s in samples {
             if s.frame_mask.len() != t
-                || s.images.len() != t * 3 * h * w
+                || s.images.len() != pixels
+                || s.objects.len() != t
+                || s.states.len() != t * 8
                 || s.actions.len() != t * ha * 7
                 || s.action_mask.len() != t * ha
             {
@@ -280,7 +389,6 @@ impl Processor {
         let cat = |f: &dyn Fn(&WindowSample) -> &[f32]| -> Vec<f32> {
             samples.iter().flat_map(|s| f(s).iter().copied()).collect()
         };
-        let images = cat(&|s| &s.images);
         let actions = cat(&|s| &s.actions);
         let frame: Vec<f32> = samples
             .iter()
@@ -296,8 +404,60 @@ impl Processor {
             }
         }
         let instructions: Vec<&str> = samples.iter().map(|s| s.instruction.as_str()).collect();
+        let l = self.config.text.max_len;
+        let (obs, labels) = match &self.config.state {
+            None => (
+                Frames::Pixels(Tensor::from_data(
+                    TensorData::new(cat(&|s| &s.images), [b, t, 3, h, w]),
+                    device,
+                )),
+                None,
+            ),
+            Some(spec) => {
+                let n = spec.tokens();
+                let mut features = Vec::with_capacity(b * t * n * FEATURES);
+                let mut categories = Vec::with_capacity(b * t * n);
+                let mut labels = Vec::with_capacity(b * t * n);
+                for s in samples {
+                    for j in 0..t {
+                        let proprio: [f32; 8] = s.states[j * 8..(j + 1) * 8]
+                            .try_into()
+                            .expect("8 numbers per state");
+                        let tok = self
+                            .state_tokens(&s.objects[j], &proprio, s.goals.get(j), s.seed)
+                            .map_err(|e| {
+                                ModelError::Input(format!(
+                                    "episode {} step {}: {e}",
+                                    s.episode, s.frame_steps[j]
+                                ))
+                            })?;
+                        features.extend(tok.features);
+                        categories.extend(tok.categories);
+                        labels.extend(tok.labels);
+                    }
+                }
+                (
+                    Frames::State(
+                        Tensor::from_data(TensorData::new(features, [b, t, n, FEATURES]), device),
+                        Tensor::from_data(TensorData::new(categories, [b, t, n]), device),
+                    ),
+                    Some((labels, n)),
+                )
+            }
+        };
         let subgoal = match self.config.subgoal {
             SubgoalInput::None => None,
+            SubgoalInput::PerObject => {
+                let (labels, n) = labels.ok_or_else(|| {
+                    ModelError::Input("per-object labels need the state observation".into())
+                })?;
+                let texts: Vec<&str> = labels.iter().map(String::as_str).collect();
+                Some(
+                    self.tokenizer
+                        .encode_batch(&texts, device)
+                        .reshape([b, t, n, l]),
+                )
+            }
             SubgoalInput::Pending => {
                 let texts: Vec<&str> = samples
                     .iter()
@@ -313,7 +473,6 @@ impl Processor {
                         texts.len()
                     )));
                 }
-                let l = self.config.text.max_len;
                 Some(
                     self.tokenizer
                         .encode_batch(&texts, device)
@@ -322,7 +481,7 @@ impl Processor {
             }
         };
         Ok(WindowBatch {
-            images: Tensor::from_data(TensorData::new(images, [b, t, 3, h, w]), device),
+            obs,
             actions: Tensor::from_data(TensorData::new(actions, [b, t, ha, 7]), device),
             frame_mask: Tensor::from_data(TensorData::new(frame, [b, t]), device),
             action_mask: Some(Tensor::from_data(
