@@ -202,7 +202,8 @@ impl DatasetIndex {
     }
 }
 
-/// Episode files (`*.mcap`) of a directory, sorted by name.
+/// Episode files (`*.mcap`) of a directory and of its immediate subdirectories (a suite
+/// dataset: one subfolder per task), sorted by path.
 pub fn episode_files(dir: &Path) -> Result<Vec<PathBuf>> {
     let mut v = vec![];
     for e in std::fs::read_dir(dir).map_err(|e| DataError::io(dir, e))? {
@@ -210,6 +211,13 @@ pub fn episode_files(dir: &Path) -> Result<Vec<PathBuf>> {
         let p = e.path();
         if p.extension().is_some_and(|x| x == "mcap") && p.is_file() {
             v.push(p);
+        } else if p.is_dir() {
+            for e in std::fs::read_dir(&p).map_err(|e| DataError::io(&p, e))? {
+                let q = e.map_err(|e| DataError::io(&p, e))?.path();
+                if q.extension().is_some_and(|x| x == "mcap") && q.is_file() {
+                    v.push(q);
+                }
+            }
         }
     }
     v.sort();
@@ -256,11 +264,14 @@ pub fn build_index(dir: impl AsRef<Path>, opts: &IndexOptions) -> Result<Dataset
             texts.dedup();
             Ok(Scanned {
                 entry: EpisodeEntry {
+                    // Relative to the dataset, `/`-separated (`t3/episode_00001.mcap` in a suite).
                     file: p
-                        .file_name()
-                        .unwrap_or_default()
-                        .to_string_lossy()
-                        .into_owned(),
+                        .strip_prefix(dir)
+                        .unwrap_or(p)
+                        .components()
+                        .map(|c| c.as_os_str().to_string_lossy().into_owned())
+                        .collect::<Vec<_>>()
+                        .join("/"),
                     length: r.len(),
                     task_id: r.meta().task_id.clone(),
                     instruction: r.meta().instruction.clone(),

@@ -73,3 +73,45 @@ fn index_build_is_deterministic_and_splits() {
     assert_eq!(mask, vec![true, true, true, true, true, true, false, false]);
     assert_eq!(v.words()[ids[0] as usize], "put");
 }
+
+/// A suite dataset: one subfolder per task, one index over all of them (paths relative, `/`).
+#[test]
+fn suite_index_covers_subfolders_with_relative_paths() {
+    let dir = tempfile::tempdir().unwrap();
+    for (task, n) in [("libero_mem_t1", 2usize), ("libero_mem_t3", 3)] {
+        let sub = dir.path().join(task);
+        data::synth::write_synthetic_dataset(&sub, n, 6, 8).unwrap();
+    }
+    let index = build_index(
+        dir.path(),
+        &IndexOptions {
+            val_fraction: 0.2,
+            seed: 0,
+        },
+    )
+    .unwrap();
+    let files: Vec<&str> = index.episodes.iter().map(|e| e.file.as_str()).collect();
+    assert_eq!(files.len(), 5);
+    assert!(
+        files[..2].iter().all(|f| f.starts_with("libero_mem_t1/")),
+        "{files:?}"
+    );
+    assert!(
+        files[2..].iter().all(|f| f.starts_with("libero_mem_t3/")),
+        "{files:?}"
+    );
+    // Every entry opens relative to the suite folder, and the windows read them.
+    for f in &files {
+        EpisodeReader::open(dir.path().join(f)).unwrap();
+    }
+    let ds = WindowDataset::open(
+        dir.path(),
+        Split::Train,
+        WindowConfig {
+            image_size: 8,
+            ..Default::default()
+        },
+    )
+    .unwrap();
+    assert!(ds.num_episodes() >= 3);
+}

@@ -33,6 +33,14 @@ pub enum EvalError {
         /// What is wrong.
         message: String,
     },
+    /// An input file (e.g. an experiment file) that is not valid.
+    #[error("{}: {message}", path.display())]
+    Input {
+        /// The file.
+        path: PathBuf,
+        /// What is wrong.
+        message: String,
+    },
     /// Writing an output file failed.
     #[error(transparent)]
     Data(#[from] data::DataError),
@@ -60,7 +68,8 @@ impl data::exit::BadInput for EvalError {
             EvalError::Task(_)
             | EvalError::Argument(_)
             | EvalError::Run { .. }
-            | EvalError::Results { .. } => true,
+            | EvalError::Results { .. }
+            | EvalError::Input { .. } => true,
             EvalError::Data(d) => d.is_bad_input(),
             _ => false,
         }

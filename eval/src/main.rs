@@ -56,6 +56,18 @@ enum Command {
         #[arg(long)]
         out: Option<PathBuf>,
     },
+    /// The paper's experiment: train every variant of an experiment file (with the `train`
+    /// binary beside this one), evaluate each on held-out seeds, write the tables (resumable).
+    Experiment {
+        /// Experiment file, e.g. configs/experiments/paper.toml.
+        file: PathBuf,
+        /// Only rebuild the tables from the runs evaluated so far (no training, no rollouts).
+        #[arg(long)]
+        tables_only: bool,
+        /// No progress bar.
+        #[arg(long)]
+        quiet: bool,
+    },
     /// Temporal scaling: evaluate the repetition family at several repetition counts N.
     Scaling {
         /// Repetition counts (N unseen in training allowed), e.g. `3,5,7,9,12`.
@@ -133,6 +145,11 @@ fn main() -> ExitCode {
     let result = match cli.command {
         Some(Command::Compare { runs, out }) => compare(&runs, out),
         Some(Command::Scaling { repeats, eval }) => scaling(&eval, &repeats),
+        Some(Command::Experiment {
+            file,
+            tables_only,
+            quiet,
+        }) => experiment(&file, tables_only, quiet),
         None => evaluate(&cli.eval),
     };
     match result {
@@ -358,5 +375,116 @@ fn compare(paths: &[PathBuf], out: Option<PathBuf>) -> anyhow::Result<()> {
         eval::write_atomic(&o, md.as_bytes())
             .with_context(|| format!("writing {}", o.display()))?;
     }
+    Ok(())
+}
+
+fn experiment(file: &std::path::Path, tables_only: bool, quiet: bool) -> anyhow::Result<()> {
+    use eval::experiment::{self as exp, Experiment};
+    let x = Experiment::load(file)?;
+    let plan = x.plan();
+    let bar = if quiet {
+        indicatif::ProgressBar::hidden()
+    } else {
+        indicatif::ProgressBar::new(plan.len() as u64)
+    };
+    bar.set_style(
+        indicatif::ProgressStyle::with_template("{bar:20} {pos}/{len} runs  {msg}  {elapsed}")
+            .expect("valid template"),
+    );
+    let mut done = Vec::new();
+    let write_tables =
+        |done: &[exp::RunResult], missing: &[(String, String)]| -> anyhow::Result<()> {
+            std::fs::create_dir_all(&x.out)?;
+            eval::write_atomic(
+                &x.out.join("results.md"),
+                exp::markdown(&x, done, missing).as_bytes(),
+            )?;
+            eval::write_atomic(
+                &x.out.join("results.json"),
+                serde_json::to_string_pretty(&exp::results_json(done))?.as_bytes(),
+            )?;
+            eval::write_atomic(&x.out.join("results.csv"), exp::csv(done).as_bytes())?;
+            eval::write_atomic(&x.out.join("results.svg"), exp::svg(done).as_bytes())?;
+            Ok(())
+        };
+    let started = std::time::Instant::now();
+    for (i, p) in plan.iter().enumerate() {
+        let run = x.runs_dir.join(&p.name);
+        if let Some(r) = exp::load_result(&x, &run, &p.spec.obs, &p.label) {
+            done.push(r);
+            bar.inc(1);
+            continue;
+        }
+        if tables_only {
+            bar.inc(1);
+            continue;
+        }
+        bar.set_message(format!("{}: training", p.name));
+        exp::train(p.spec, &p.name, &p.variant, &x.runs_dir)?;
+        let rd = eval::run::open(&run)?;
+        let device = eval::run::device(&rd)?;
+        let tasks = eval::resolve_tasks(&p.spec.suite, None)?;
+        let cfg = EvalConfig {
+            episodes: x.episodes,
+            seed: x.seed,
+            full_budget: x.full_budget,
+            workers: x.workers,
+            ..EvalConfig::default()
+        };
+        let make = || -> Result<Box<dyn Policy>, EvalError> {
+            Ok(Box::new(eval::run::policy(&rd, &device)?))
+        };
+        let name = p.name.clone();
+        let progress = |pr: &eval::Progress| {
+            bar.set_message(format!(
+                "{name}: evaluating {}/{} episodes",
+                pr.done, pr.total
+            ));
+        };
+        let mut results = eval::evaluate(&tasks, &make, &cfg, &progress)?;
+        results.policy = "model".into();
+        results.run = Some(run.display().to_string());
+        results.checkpoint_step = Some(rd.step);
+        let out = run.join("eval");
+        eval::write_atomic(
+            &out.join("results.md"),
+            report::markdown(&results.tasks).as_bytes(),
+        )?;
+        eval::write_atomic(
+            &out.join("results.csv"),
+            report::csv(&results.tasks).as_bytes(),
+        )?;
+        eval::write_atomic(
+            &out.join("results.json"),
+            serde_json::to_string_pretty(&results)?.as_bytes(),
+        )?;
+        if let Some(r) = exp::load_result(&x, &run, &p.spec.obs, &p.label) {
+            done.push(r);
+        }
+        let missing: Vec<(String, String)> = plan[i + 1..]
+            .iter()
+            .map(|q| (q.spec.obs.clone(), q.label.clone()))
+            .collect();
+        write_tables(&done, &missing)?;
+        bar.inc(1);
+    }
+    bar.finish_and_clear();
+    let missing: Vec<(String, String)> = plan
+        .iter()
+        .filter(|p| {
+            let run = x.runs_dir.join(&p.name).display().to_string();
+            !done.iter().any(|d| d.run == run)
+        })
+        .map(|p| (p.spec.obs.clone(), p.label.clone()))
+        .collect();
+    write_tables(&done, &missing)?;
+    print!("{}", exp::markdown(&x, &done, &missing));
+    eprintln!(
+        "wrote {}/results.{{md,json,csv,svg}} ({} of {} runs) in {:.1} min",
+        x.out.display(),
+        done.len(),
+        plan.len(),
+        started.elapsed().as_secs_f64() / 60.0
+    );
     Ok(())
 }

@@ -14,6 +14,8 @@ use crate::error::{ModelError, Result};
 use crate::io::state::FEATURES;
 
 /// A window of observations, as the model's [`Observer`] reads them.
+// Two tensor handles against one: one value per batch, not worth a Box.
+#[allow(clippy::large_enum_variant)]
 #[derive(Clone, Debug)]
 pub enum Frames {
     /// Agentview RGB in [0, 1] `[B, T, 3, H, W]`.
@@ -308,5 +310,22 @@ mod tests {
         assert_eq!(cfg.grid(), [4, 4]);
         let x = Tensor::<4>::random([1, 3, 32, 32], Distribution::Default, &device);
         assert_eq!(enc.forward_frames(x).dims(), [1, 16, 64]);
+    }
+
+    #[test]
+    fn state_encoder_tells_categories_apart() {
+        let (_guard, device) = test_device();
+        let enc = StateEncoder::new(3, 6, 16, &device);
+        let x = Tensor::<4>::ones([1, 1, 3, FEATURES], &device);
+        let c = Tensor::<3, Int>::from_data(TensorData::new(vec![3i64, 4, 3], [1, 1, 3]), &device);
+        let y = enc.forward(x, c).unwrap().reshape([3, 16]);
+        let d = |i: usize, j: usize| -> f32 {
+            (y.clone().narrow(0, i, 1) - y.clone().narrow(0, j, 1))
+                .abs()
+                .sum()
+                .into_scalar()
+        };
+        assert!(d(0, 1) > 1e-3, "different categories, same features");
+        assert_eq!(d(0, 2), 0.0, "same category, same features");
     }
 }

@@ -91,7 +91,15 @@ fn recorded_poses_track_the_objects_and_the_grasp() {
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("ep.mcap");
     assert!(
-        sim::generate::record_episode(&mut env, &task, 0, &path, Default::default()).unwrap(),
+        sim::generate::record_episode(
+            &mut env,
+            &task,
+            0,
+            &path,
+            Default::default(),
+            &Default::default()
+        )
+        .unwrap(),
         "the expert solves T1 seed 0"
     );
     let reader = data::EpisodeReader::open(&path).unwrap();

@@ -88,7 +88,8 @@ fn yes() -> bool {
 #[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct GenerateSpec {
-    /// Task id or alias (`t1` … `t10`, `t3@12`, `libero_goal/<stem>`).
+    /// Task id or alias (`t1` … `t10`, `t3@12`, `libero_goal/<stem>`), or a suite (`libero_mem`,
+    /// `libero_goal`, a comma list): then `episodes` of every task, one multi-task dataset.
     pub task: String,
     /// Number of episodes (train + validation).
     pub episodes: usize,
@@ -106,6 +107,10 @@ pub struct GenerateSpec {
     /// llvmpipe); the files do not depend on it.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub workers: Option<usize>,
+    /// A deterministic expert (`sim generate --plain-expert`): no seeded variation and no
+    /// action noise, one demonstration per start state.
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub plain_expert: bool,
 }
 
 fn default_camera() -> usize {
@@ -288,15 +293,33 @@ pub struct EvalSection {
 impl Config {
     /// Reads and checks a config file; errors name the file and the offending key.
     pub fn load(path: impl AsRef<Path>) -> Result<Config> {
+        Config::load_with(path, &[])
+    }
+
+    /// Loads a config file with `KEY=VALUE` overrides applied first (`model.variant=slotvla_h1`,
+    /// `train.steps=500`, `name="x"`; the value is TOML, a bare word is a string); an override of
+    /// an unknown key or of a bad value is an error naming it.
+    pub fn load_with(path: impl AsRef<Path>, sets: &[String]) -> Result<Config> {
         let path = path.as_ref();
         let text = std::fs::read_to_string(path).map_err(|e| TrainError::Config {
             path: path.to_path_buf(),
             message: format!("cannot read: {e}"),
         })?;
-        let cfg = Config::parse(&text).map_err(|message| TrainError::Config {
+        let err = |message: String| TrainError::Config {
             path: path.to_path_buf(),
             message,
-        })?;
+        };
+        let text = if sets.is_empty() {
+            text
+        } else {
+            let mut table: toml::Table =
+                toml::from_str(&text).map_err(|e| err(describe_toml_error(&text, &e)))?;
+            for s in sets {
+                apply_set(&mut table, s).map_err(err)?;
+            }
+            toml::to_string(&table).map_err(|e| err(e.to_string()))?
+        };
+        let cfg = Config::parse(&text).map_err(err)?;
         let mut cfg = cfg;
         cfg.source = Some(path.to_path_buf());
         if cfg.name.is_none() {
@@ -413,6 +436,33 @@ impl Config {
     }
 }
 
+/// Applies one `KEY=VALUE` override (dotted key, TOML value or a bare string) to `table`.
+fn apply_set(table: &mut toml::Table, set: &str) -> std::result::Result<(), String> {
+    let (key, value) = set
+        .split_once('=')
+        .ok_or_else(|| format!("--set `{set}`: expected KEY=VALUE"))?;
+    let value: toml::Value = match toml::from_str::<toml::Table>(&format!("v = {value}")) {
+        Ok(mut t) => t.remove("v").expect("just parsed"),
+        Err(_) => toml::Value::String(value.to_string()),
+    };
+    let parts: Vec<&str> = key.trim().split('.').collect();
+    if parts.iter().any(|p| p.is_empty()) {
+        return Err(format!("--set `{set}`: empty key part"));
+    }
+    let mut t = table;
+    for p in &parts[..parts.len() - 1] {
+        t = match t
+            .entry(p.to_string())
+            .or_insert_with(|| toml::Value::Table(toml::Table::new()))
+        {
+            toml::Value::Table(inner) => inner,
+            _ => return Err(format!("--set `{set}`: `{p}` is not a table")),
+        };
+    }
+    t.insert(parts[parts.len() - 1].to_string(), value);
+    Ok(())
+}
+
 /// Deep-merges `over` into `base`; a key that `base` lacks is an error naming its path.
 fn merge(base: &mut toml::Table, over: &toml::Table, at: &str) -> std::result::Result<(), String> {
     for (k, v) in over {
@@ -521,6 +571,34 @@ variant = "e_slotssm"
             Config::parse(&format!("{MIN}[model.overrides]\nimage_size = \"big\"\n")).unwrap_err();
         assert!(e.contains("model.overrides"), "{e}");
     }
+
+    #[test]
+    fn set_overrides_apply_and_name_bad_keys() {
+        let dir = tempfile::tempdir().unwrap();
+        let p = dir.path().join("c.toml");
+        std::fs::write(&p, MIN).unwrap();
+        let sets = |v: &[&str]| v.iter().map(|s| s.to_string()).collect::<Vec<_>>();
+        let c = Config::load_with(
+            &p,
+            &sets(&[
+                "model.variant=slotvla_h1",
+                "train.steps=7",
+                "name=x",
+                "model.obs=state",
+            ]),
+        )
+        .unwrap();
+        assert_eq!(c.model.variant, "slotvla_h1");
+        assert_eq!(c.train.steps, 7);
+        assert_eq!(c.run_name(), "x");
+        assert_eq!(c.model.obs, ObsMode::State);
+        let e = Config::load_with(&p, &sets(&["train.stepz=7"])).unwrap_err();
+        assert!(e.to_string().contains("stepz"), "{e}");
+        let e = Config::load_with(&p, &sets(&["train.steps"])).unwrap_err();
+        assert!(e.to_string().contains("KEY=VALUE"), "{e}");
+        let e = Config::load_with(&p, &sets(&["model.variant.x=1"])).unwrap_err();
+        assert!(e.to_string().contains("not a table"), "{e}");
+    }
 }
 
 #[cfg(test)]
@@ -547,5 +625,18 @@ mod shipped {
         want.extend(["tiny", "libero_goal", "slotvla_h1", "slotvla_h8", "dense"].map(String::from));
         want.sort();
         assert_eq!(names, want);
+        // State-mode configs are named `state_<file>` and read the object state.
+        let mut states = vec![];
+        for e in std::fs::read_dir(dir.join("state")).unwrap() {
+            let p = e.unwrap().path();
+            let c = Config::load(&p).unwrap_or_else(|e| panic!("{e}"));
+            let stem = p.file_stem().unwrap().to_string_lossy().into_owned();
+            assert_eq!(c.run_name(), format!("state_{stem}"));
+            assert_eq!(c.model.obs, ObsMode::State, "{}", p.display());
+            c.model_config(vec![]).unwrap();
+            states.push(stem);
+        }
+        states.sort();
+        assert_eq!(states, ["libero_goal", "libero_mem", "t1", "tiny"]);
     }
 }

@@ -11,7 +11,7 @@ use data::{DatasetIndex, Split, WindowConfig, WindowDataset};
 #[cfg(feature = "generate")]
 use indicatif::{ProgressBar, ProgressStyle};
 use model::Processor;
-use model::io::state::StateSpec;
+use model::io::state::{StateSpec, StateStats};
 use rand::SeedableRng;
 use rand::seq::SliceRandom;
 use rand_chacha::ChaCha8Rng;
@@ -58,7 +58,11 @@ pub fn ensure_dataset(cfg: &Config, progress: bool) -> Result<()> {
 #[cfg(feature = "generate")]
 pub fn generate_dataset(spec: &GenerateSpec, dir: &Path, progress: bool) -> Result<DatasetIndex> {
     let bad = |message: String| TrainError::Usage(format!("data.generate: {message}"));
-    let task = sim::task::resolve(&spec.task).map_err(|e| bad(e.to_string()))?;
+    let tasks = sim::pack::resolve_suites(&spec.task, None).map_err(|e| bad(e.to_string()))?;
+    if tasks.is_empty() {
+        return Err(bad(format!("task `{}` names no task", spec.task)));
+    }
+    let name = spec.task.clone();
     // One simulator thread unless asked: with two, Mesa's llvmpipe has crashed (SIGSEGV in
     // mjr_readPixels) in about one of five 30-episode runs here; a rerun resumes.
     let workers = spec.workers.unwrap_or(1);
@@ -68,30 +72,40 @@ pub fn generate_dataset(spec: &GenerateSpec, dir: &Path, progress: bool) -> Resu
         seed: spec.seed,
         workers,
         image_size: spec.image_size,
+        expert: if spec.plain_expert {
+            sim::generate::plain_expert()
+        } else {
+            sim::expert::ExpertConfig::default()
+        },
         ..Default::default()
     };
     let bar = if progress {
-        let b = ProgressBar::new(spec.episodes as u64);
+        let b = ProgressBar::new((spec.episodes * tasks.len()) as u64);
         b.set_style(
             ProgressStyle::with_template(
                 "generating {prefix} {bar:30} {pos}/{len} episodes  {msg}  ETA {eta}",
             )
             .expect("valid template"),
         );
-        b.set_prefix(task.id.clone());
+        b.set_prefix(name.clone());
         b
     } else {
         ProgressBar::hidden()
     };
     let started = std::time::Instant::now();
-    let index = sim::generate::generate(&task, dir, &gen_cfg, &|p| {
-        bar.set_position(p.done as u64);
+    let on_progress = |i: usize, p: sim::generate::GenerateProgress| {
+        bar.set_position((i * spec.episodes + p.done) as u64);
         bar.set_message(format!(
-            "{} ok, {} failed attempts",
-            p.successes, p.failures
+            "{}: {} ok, {} failed attempts",
+            tasks[i].id, p.successes, p.failures
         ));
-    })
-    .map_err(|e| match e {
+    };
+    let generated = if tasks.len() == 1 {
+        sim::generate::generate(&tasks[0], dir, &gen_cfg, &|p| on_progress(0, p))
+    } else {
+        sim::generate::generate_suite(&tasks, dir, &gen_cfg, &on_progress)
+    };
+    let index = generated.map_err(|e| match e {
         sim::generate::GenerateError::Argument(m) => bad(m),
         sim::generate::GenerateError::Data(d) => TrainError::Data(d),
         other => TrainError::Other(format!("generating {}: {other}", dir.display())),
@@ -101,7 +115,7 @@ pub fn generate_dataset(spec: &GenerateSpec, dir: &Path, progress: bool) -> Resu
         let steps: usize = index.episodes.iter().map(|e| e.length).sum();
         eprintln!(
             "generated {}: {} episodes ({steps} steps, {}² frames) in {} in {:.1} s",
-            task.id,
+            name,
             index.episodes.len(),
             spec.image_size,
             dir.display(),
@@ -362,6 +376,71 @@ impl EpisodeSampler {
     }
 }
 
+/// The object-state spec of a dataset (state mode): the categories of every object of every
+/// episode, the most objects in one scene, and the standardisation of the token features over
+/// every 4th frame of the training episodes. Every episode must have been recorded with object
+/// poses (episode schema 2); the first that was not is named in the error.
+pub fn state_spec(dir: &Path, index: &DatasetIndex) -> Result<StateSpec> {
+    use rayon::prelude::*;
+    let stats = index
+        .episodes
+        .par_iter()
+        .map(|e| -> Result<StateStats> {
+            let path = dir.join(&e.file);
+            let r = data::EpisodeReader::open(&path)?;
+            let steps = r.read_raw_steps(0..r.len())?;
+            let missing = || {
+                TrainError::Usage(format!(
+                    "{}: `obs = \"state\"` needs object poses in /objects, and this episode was \
+                     recorded without them (re-generate it with this version's `sim generate`)",
+                    path.display()
+                ))
+            };
+            let mut stats = StateStats::default();
+            for (t, s) in steps.iter().enumerate() {
+                if s.objects.is_empty() || s.objects.iter().any(|o| o.pose.is_none()) {
+                    return Err(missing());
+                }
+                // Validation episodes give the categories and object count, not the statistics.
+                if e.split == Split::Train && t % 4 == 0 || t == 0 {
+                    stats
+                        .add(&s.objects, &s.state)
+                        .map_err(|m| TrainError::Usage(format!("{}: {m}", path.display())))?;
+                }
+            }
+            Ok(stats)
+        })
+        .collect::<Result<Vec<_>>>()?;
+    let mut all = StateStats::default();
+    for s in &stats {
+        all.merge(s);
+    }
+    Ok(all.finish())
+}
+
+/// Checks that every episode of the dataset records its goal progress (`/goal` with a known
+/// goal length), which an oracle variant reads; the first that does not (e.g. imported from
+/// RLDS, which has no subgoals) is named in the error.
+pub fn check_goals(dir: &Path, index: &DatasetIndex) -> Result<()> {
+    for e in &index.episodes {
+        let path = dir.join(&e.file);
+        let r = data::EpisodeReader::open(&path)?;
+        let has_channel = r
+            .channels()
+            .iter()
+            .any(|c| c.topic == "/goal" && c.count > 0);
+        let first = r.read_raw_steps(0..1.min(r.len()))?;
+        if !has_channel || first.first().is_none_or(|s| s.progress.total == 0) {
+            return Err(TrainError::Usage(format!(
+                "{}: the oracle variant reads the goal progress, and this episode's /goal \
+                 records none (no subgoals: recorded without a goal tracker, or imported)",
+                path.display()
+            )));
+        }
+    }
+    Ok(())
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -423,52 +502,4 @@ mod tests {
             );
         }
     }
-}
-
-/// The object-state spec of a dataset (state mode): the categories of every object of every
-/// episode and the most objects in one scene. Every episode must have been recorded with object
-/// poses (episode schema 2); the first that was not is named in the error.
-pub fn state_spec(dir: &Path, index: &DatasetIndex) -> Result<StateSpec> {
-    let mut names: Vec<String> = Vec::new();
-    let mut most = 0;
-    for e in &index.episodes {
-        let path = dir.join(&e.file);
-        let r = data::EpisodeReader::open(&path)?;
-        let first = r.read_raw_steps(0..1.min(r.len()))?;
-        let objects = first.first().map(|s| s.objects.as_slice()).unwrap_or(&[]);
-        if objects.is_empty() || objects.iter().any(|o| o.pose.is_none()) {
-            return Err(TrainError::Usage(format!(
-                "{}: `obs = \"state\"` needs object poses in /objects, and this episode was \
-                 recorded without them (re-generate it with this version's `sim generate`)",
-                path.display()
-            )));
-        }
-        most = most.max(objects.len());
-        names.extend(objects.iter().map(|o| o.name.clone()));
-    }
-    Ok(StateSpec::from_names(
-        names.iter().map(String::as_str),
-        most,
-    ))
-}
-
-/// Checks that every episode of the dataset records goal progress (`/goal`), which an oracle
-/// variant reads; the first that does not is named in the error.
-pub fn check_goals(dir: &Path, index: &DatasetIndex) -> Result<()> {
-    for e in &index.episodes {
-        let path = dir.join(&e.file);
-        let r = data::EpisodeReader::open(&path)?;
-        if !r
-            .channels()
-            .iter()
-            .any(|c| c.topic == "/goal" && c.count > 0)
-        {
-            return Err(TrainError::Usage(format!(
-                "{}: the oracle variant reads the goal progress, and this episode has no /goal \
-                 channel",
-                path.display()
-            )));
-        }
-    }
-    Ok(())
 }

@@ -1,4 +1,4 @@
-//! `train CONFIG [--resume] [--keep K] [--steps N] [--run-dir DIR] [--backend B]`: trains an
+//! `train CONFIG [--set KEY=VALUE]… [--resume] [--keep K] [--steps N] [--run-dir DIR] [--backend B]`: trains an
 //! experiment config; exit status 2 on bad input (config, dataset, backend, checkpoint).
 
 use std::path::PathBuf;
@@ -28,13 +28,17 @@ struct Args {
     /// Backend: flex, ndarray (feature `ndarray`) or wgpu (feature `wgpu`); overrides [backend].
     #[arg(long)]
     backend: Option<String>,
+    /// Override a config key, `KEY=VALUE` with a TOML value (repeatable), e.g.
+    /// `--set model.variant=slotvla_h1 --set name=t3_h1`.
+    #[arg(long = "set", value_name = "KEY=VALUE")]
+    sets: Vec<String>,
     /// No progress bar.
     #[arg(long)]
     quiet: bool,
 }
 
 fn run(args: Args) -> Result<train::TrainSummary, train::TrainError> {
-    let cfg = train::Config::load(&args.config)?;
+    let cfg = train::Config::load_with(&args.config, &args.sets)?;
     let opts = train::TrainOptions {
         resume: args.resume,
         keep: args.keep,

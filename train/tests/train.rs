@@ -316,6 +316,7 @@ fn generate_spec(task: &str) -> train::config::GenerateSpec {
         seed: 0,
         image_size: 32,
         workers: None,
+        plain_expert: false,
     }
 }
 
@@ -390,6 +391,60 @@ fn incompatible_checkpoint_exits_2() {
         "--resume",
     ]);
     assert_eq!(out.status.code(), Some(2));
+}
+
+#[test]
+fn state_mode_on_data_without_poses_and_oracle_without_goal_exit_2() {
+    let _g = serial();
+    let dir = tempfile::tempdir().unwrap();
+    // The synthetic plate has no pose: state mode names the first episode lacking one.
+    let mut cfg = short_config(2, 2);
+    cfg.model.obs = train::config::ObsMode::State;
+    let p = write_config(dir.path(), &cfg);
+    let run = dir.path().join("run");
+    let out = train_bin(&[p.to_str().unwrap(), "--run-dir", run.to_str().unwrap()]);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(2), "{stderr}");
+    assert!(
+        stderr.contains("synth_000.mcap") && stderr.contains("object poses"),
+        "{stderr}"
+    );
+    assert_eq!(
+        stderr.lines().filter(|l| l.starts_with("error")).count(),
+        1,
+        "{stderr}"
+    );
+    // An oracle variant on episodes whose /goal records nothing (as data imported from RLDS).
+    let stripped = dir.path().join("nogoal");
+    std::fs::create_dir_all(&stripped).unwrap();
+    let index = data::DatasetIndex::load(dataset()).unwrap();
+    for e in &index.episodes {
+        let r = data::EpisodeReader::open(dataset().join(&e.file)).unwrap();
+        let mut w = data::EpisodeWriter::create(
+            stripped.join(&e.file),
+            r.meta().clone(),
+            data::WriterOptions::default(),
+        )
+        .unwrap();
+        for t in 0..r.len() {
+            let mut step = r.read_step(t).unwrap();
+            step.progress = data::GoalProgress::default();
+            w.write_step(&step).unwrap();
+        }
+        w.finish().unwrap();
+    }
+    index.save(&stripped).unwrap();
+    let back = data::EpisodeReader::open(stripped.join(&index.episodes[0].file)).unwrap();
+    assert_eq!(back.read_step(0).unwrap().progress.total, 0);
+    let mut cfg = short_config(2, 2);
+    cfg.data.dir = stripped.clone();
+    cfg.model.variant = "e_slotssm_oracle".into();
+    let e = train::train(&cfg, &opts(&dir.path().join("run2"))).unwrap_err();
+    assert_eq!(e.exit_code(), 2);
+    assert!(
+        e.to_string().contains("/goal") && e.to_string().contains("synth_000.mcap"),
+        "{e}"
+    );
 }
 
 /// Bits of every float parameter inside the modules named `part` (anywhere in the model tree,

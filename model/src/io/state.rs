@@ -5,11 +5,18 @@
 //! k is the same object for a whole episode, as a tracked slot is).
 //!
 //! Token features ([`FEATURES`] numbers):
-//! - object: position ×10 (decimetres, world frame), position − gripper position ×10, the
-//!   quaternion (w, x, y, z), grasped (0/1), 0;
-//! - robot: gripper position ×10, three zeros, the gripper axis-angle and 0, then the two
-//!   finger joint positions ×10;
+//! - object: position ×10 (decimetres, world frame), position − gripper position ×10, the first
+//!   two columns of its rotation matrix (the continuous 6-D rotation representation: where an
+//!   object's rim or handle lies is linear in them, and not in a quaternion), grasped (0/1), 0, 0;
+//! - robot: gripper position ×10, three zeros, the first two columns of the gripper's rotation
+//!   matrix, 0, then the two finger joint positions ×10;
 //! - padding: zeros.
+//!
+//! The numbers are then standardised with the training data's mean and standard deviation per
+//! feature, one set for object tokens and one for the robot token ([`StateStats`]): raw, the
+//! table height (9 dm) and the resting quaternions are large constants next to the centimetres
+//! that matter, and a model fed raw numbers does not learn to use them (measured: T1 stuck at the
+//! label-conditioned mean action).
 //!
 //! Category ids: [`PAD`], [`UNKNOWN`], [`ROBOT`], then the spec's categories in order.
 
@@ -19,7 +26,7 @@ use serde::{Deserialize, Serialize};
 use crate::error::{ModelError, Result};
 
 /// Numbers per token.
-pub const FEATURES: usize = 12;
+pub const FEATURES: usize = 15;
 /// Category of a padding token.
 pub const PAD: i64 = 0;
 /// Category of an object whose category the model was not trained with.
@@ -39,17 +46,105 @@ pub fn category(name: &str) -> &str {
 }
 
 /// What a state-mode model was built for (saved in `processor.json`).
-#[derive(Serialize, Deserialize, Clone, Debug, PartialEq, Eq)]
+#[derive(Serialize, Deserialize, Clone, Debug, PartialEq)]
 #[serde(deny_unknown_fields)]
 pub struct StateSpec {
     /// Object categories, sorted (ids 3, 4, …).
     pub categories: Vec<String>,
     /// Object tokens per frame (scenes with fewer objects are padded).
     pub max_objects: usize,
+    /// Mean and standard deviation of each feature of object tokens.
+    pub object_norm: [[f32; FEATURES]; 2],
+    /// Mean and standard deviation of each feature of the robot token.
+    pub robot_norm: [[f32; FEATURES]; 2],
+}
+
+/// Running sums for the standardisation of [`StateSpec`], over frames of the training data.
+#[derive(Clone, Debug, Default)]
+pub struct StateStats {
+    names: Vec<String>,
+    max_objects: usize,
+    objects: [[f64; FEATURES]; 3],
+    robot: [[f64; FEATURES]; 3],
+}
+
+/// Smallest standard deviation used (features that hardly vary are only centred).
+const MIN_STD: f64 = 0.1;
+
+impl StateStats {
+    /// Adds one frame: the objects in scene order (with poses) and the robot's proprio state.
+    pub fn add(&mut self, objects: &[ObjectAnnotation], state: &[f32; 8]) -> Result<()> {
+        for o in objects {
+            if !self.names.contains(&o.name) {
+                self.names.push(o.name.clone());
+            }
+        }
+        self.max_objects = self.max_objects.max(objects.len());
+        let order: Vec<usize> = (0..objects.len()).collect();
+        let spec = StateSpec::from_names(objects.iter().map(|o| o.name.as_str()), objects.len());
+        let t = raw_tokens(&spec, objects, state, "0", &order)?;
+        let n = objects.len() + 1;
+        for k in 0..n {
+            let acc = if k + 1 == n {
+                &mut self.robot
+            } else {
+                &mut self.objects
+            };
+            let f = &t.features[k * FEATURES..(k + 1) * FEATURES];
+            for d in 0..FEATURES {
+                let x = f64::from(f[d]);
+                acc[0][d] += 1.0;
+                acc[1][d] += x;
+                acc[2][d] += x * x;
+            }
+        }
+        Ok(())
+    }
+
+    /// Adds the sums of `other` (in a fixed order, so the result does not depend on threads).
+    pub fn merge(&mut self, other: &StateStats) {
+        for n in &other.names {
+            if !self.names.contains(n) {
+                self.names.push(n.clone());
+            }
+        }
+        self.max_objects = self.max_objects.max(other.max_objects);
+        for (a, b) in [
+            (&mut self.objects, &other.objects),
+            (&mut self.robot, &other.robot),
+        ] {
+            for i in 0..3 {
+                for d in 0..FEATURES {
+                    a[i][d] += b[i][d];
+                }
+            }
+        }
+    }
+
+    /// The spec of everything added.
+    pub fn finish(&self) -> StateSpec {
+        let norm = |acc: &[[f64; FEATURES]; 3]| {
+            let mut out = [[0.0f32; FEATURES], [1.0f32; FEATURES]];
+            for d in 0..FEATURES {
+                let n = acc[0][d].max(1.0);
+                let mean = acc[1][d] / n;
+                let var = (acc[2][d] / n - mean * mean).max(0.0);
+                out[0][d] = mean as f32;
+                out[1][d] = var.sqrt().max(MIN_STD) as f32;
+            }
+            out
+        };
+        StateSpec {
+            object_norm: norm(&self.objects),
+            robot_norm: norm(&self.robot),
+            ..StateSpec::from_names(self.names.iter().map(String::as_str), self.max_objects)
+        }
+    }
 }
 
 impl StateSpec {
-    /// The spec of scenes holding the given object instances (names, any number of scenes).
+    /// The spec of scenes holding the given object instances (names, any number of scenes),
+    /// without standardisation (mean 0, standard deviation 1).
     pub fn from_names<'a>(names: impl IntoIterator<Item = &'a str>, max_objects: usize) -> Self {
         let mut categories: Vec<String> = names.into_iter().map(|n| category(n).into()).collect();
         categories.sort();
@@ -57,6 +152,8 @@ impl StateSpec {
         StateSpec {
             categories,
             max_objects,
+            object_norm: [[0.0; FEATURES], [1.0; FEATURES]],
+            robot_norm: [[0.0; FEATURES], [1.0; FEATURES]],
         }
     }
 
@@ -98,6 +195,45 @@ pub fn order(seed: u64, n: usize) -> Vec<usize> {
     p
 }
 
+/// Rotation matrix (row-major) of a unit quaternion (w, x, y, z).
+fn quat_matrix([w, x, y, z]: [f32; 4]) -> [[f32; 3]; 3] {
+    let n = (w * w + x * x + y * y + z * z).sqrt().max(1e-12);
+    let (w, x, y, z) = (w / n, x / n, y / n, z / n);
+    [
+        [
+            1.0 - 2.0 * (y * y + z * z),
+            2.0 * (x * y - w * z),
+            2.0 * (x * z + w * y),
+        ],
+        [
+            2.0 * (x * y + w * z),
+            1.0 - 2.0 * (x * x + z * z),
+            2.0 * (y * z - w * x),
+        ],
+        [
+            2.0 * (x * z - w * y),
+            2.0 * (y * z + w * x),
+            1.0 - 2.0 * (x * x + y * y),
+        ],
+    ]
+}
+
+/// Rotation matrix of an axis-angle vector (Rodrigues).
+fn axis_angle_matrix(v: [f32; 3]) -> [[f32; 3]; 3] {
+    let angle = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
+    if angle < 1e-9 {
+        return [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]];
+    }
+    let (s, c) = (angle / 2.0).sin_cos();
+    let k = s / angle;
+    quat_matrix([c, v[0] * k, v[1] * k, v[2] * k])
+}
+
+/// The first two columns of a rotation matrix, column by column.
+fn rotation_columns(m: [[f32; 3]; 3]) -> [f32; 6] {
+    [m[0][0], m[1][0], m[2][0], m[0][1], m[1][1], m[2][1]]
+}
+
 /// The tokens of one frame.
 #[derive(Clone, Debug, PartialEq)]
 pub struct StateTokens {
@@ -111,8 +247,37 @@ pub struct StateTokens {
 }
 
 /// The tokens of one frame: `objects` in scene order (with poses), the robot's proprio `state`
-/// (eef position, axis-angle, finger qpos), the robot's label, and the episode's `order`.
+/// (eef position, axis-angle, finger qpos), the robot's label, and the episode's `order`;
+/// standardised with the spec's statistics.
 pub fn tokens(
+    spec: &StateSpec,
+    objects: &[ObjectAnnotation],
+    state: &[f32; 8],
+    robot_label: &str,
+    order: &[usize],
+) -> Result<StateTokens> {
+    let mut t = raw_tokens(spec, objects, state, robot_label, order)?;
+    let n = spec.tokens();
+    for k in 0..n {
+        let [mean, std] = if k + 1 == n {
+            &spec.robot_norm
+        } else if t.categories[k] == PAD {
+            continue;
+        } else {
+            &spec.object_norm
+        };
+        for (d, x) in t.features[k * FEATURES..(k + 1) * FEATURES]
+            .iter_mut()
+            .enumerate()
+        {
+            *x = (*x - mean[d]) / std[d];
+        }
+    }
+    Ok(t)
+}
+
+/// [`tokens`] before standardisation.
+fn raw_tokens(
     spec: &StateSpec,
     objects: &[ObjectAnnotation],
     state: &[f32; 8],
@@ -151,18 +316,22 @@ pub fn tokens(
             f[d] = pose[d] * SCALE;
             f[3 + d] = (pose[d] - eef[d]) * SCALE;
         }
-        f[6..10].copy_from_slice(&pose[3..7]);
-        f[10] = f32::from(u8::from(o.grasped.unwrap_or(false)));
+        f[6..12].copy_from_slice(&rotation_columns(quat_matrix([
+            pose[3], pose[4], pose[5], pose[6],
+        ])));
+        f[12] = f32::from(u8::from(o.grasped.unwrap_or(false)));
         categories[k] = spec.category_id(&o.name);
         labels[k] = o.subgoal_label.clone();
     }
     let r = &mut features[(n - 1) * FEATURES..];
     for d in 0..3 {
         r[d] = eef[d] * SCALE;
-        r[6 + d] = state[3 + d];
     }
-    r[10] = state[6] * SCALE;
-    r[11] = state[7] * SCALE;
+    r[6..12].copy_from_slice(&rotation_columns(axis_angle_matrix([
+        state[3], state[4], state[5],
+    ])));
+    r[13] = state[6] * SCALE;
+    r[14] = state[7] * SCALE;
     categories[n - 1] = ROBOT;
     labels[n - 1] = robot_label.to_string();
     Ok(StateTokens {
@@ -236,10 +405,14 @@ mod tests {
         let f = |k: usize| &t.features[k * FEATURES..(k + 1) * FEATURES];
         // Token 0 is the plate: x −0.1 m → −1 dm, relative x −2 dm, not grasped.
         assert!((f(0)[0] + 1.0).abs() < 1e-6 && (f(0)[3] + 2.0).abs() < 1e-6);
-        assert_eq!(f(0)[10], 0.0);
-        assert_eq!(f(1)[10], 1.0);
+        assert_eq!(f(0)[12], 0.0);
+        assert_eq!(f(1)[12], 1.0);
+        // The identity quaternion: columns (1, 0, 0) and (0, 1, 0).
+        assert_eq!(&f(0)[6..12], &[1.0, 0.0, 0.0, 0.0, 1.0, 0.0]);
         assert!(f(2).iter().all(|&v| v == 0.0), "padding");
-        assert!((f(3)[0] - 1.0).abs() < 1e-6 && f(3)[6] == 0.5 && (f(3)[10] - 0.2).abs() < 1e-6);
+        // The robot: axis-angle 0.5 rad about x → second column (0, cos 0.5, sin 0.5).
+        assert!((f(3)[0] - 1.0).abs() < 1e-6 && (f(3)[13] - 0.2).abs() < 1e-6);
+        assert!((f(3)[10] - 0.5f32.cos()).abs() < 1e-5 && (f(3)[11] - 0.5f32.sin()).abs() < 1e-5);
         // Nothing in a token depends on the instance id.
         let mut renumbered = objects.clone();
         renumbered.iter_mut().for_each(|o| o.instance_id = 99);
@@ -252,6 +425,39 @@ mod tests {
         )
         .unwrap();
         assert_eq!(u, t);
+    }
+
+    #[test]
+    fn statistics_standardise_object_and_robot_tokens() {
+        let mut stats = StateStats::default();
+        let state = |x: f32| [x, 0.0, 1.0, 0.0, 0.0, 0.0, 0.02, -0.02];
+        let mut a = StateStats::default();
+        a.add(&[obj("bowl_1", 0.1, "0")], &state(0.0)).unwrap();
+        let mut b = StateStats::default();
+        b.add(
+            &[obj("bowl_1", 0.3, "0"), obj("plate_1", 0.3, "0")],
+            &state(0.2),
+        )
+        .unwrap();
+        stats.merge(&a);
+        stats.merge(&b);
+        let spec = stats.finish();
+        assert_eq!(spec.categories, ["bowl", "plate"]);
+        assert_eq!(spec.max_objects, 2);
+        // Object x in dm: 1, 3, 3 → mean 7/3; the robot x: 0, 2 → mean 1, std 1.
+        let [mean, std] = spec.object_norm;
+        assert!((mean[0] - 7.0 / 3.0).abs() < 1e-5, "{mean:?}");
+        assert!((std[0] - (8.0f32 / 9.0).sqrt()).abs() < 1e-5, "{std:?}");
+        assert_eq!(std[7], MIN_STD as f32, "a constant is only centred");
+        assert_eq!((spec.robot_norm[0][0], spec.robot_norm[1][0]), (1.0, 1.0));
+        // Standardised tokens: the object's x is (3 − 7/3) / std, padding stays zero.
+        let t = tokens(&spec, &[obj("plate_1", 0.3, "0")], &state(0.2), "0", &[0]).unwrap();
+        assert!((t.features[0] - (2.0 / 3.0) / std[0]).abs() < 1e-5);
+        assert!(t.features[FEATURES..2 * FEATURES].iter().all(|&v| v == 0.0));
+        assert!(
+            (t.features[2 * FEATURES] - 1.0).abs() < 1e-5,
+            "robot x (2 − 1) / 1"
+        );
     }
 
     #[test]

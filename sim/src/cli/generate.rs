@@ -4,33 +4,19 @@ use std::path::PathBuf;
 
 use super::BadInput;
 
-/// Generates `episodes` episodes (of which `val` validation) of `task` (or of every shipped task,
-/// one subfolder each, for `all`) into `out`.
-pub fn run(
-    task: String,
-    episodes: usize,
-    val: usize,
-    seed: u64,
-    out: PathBuf,
-    workers: usize,
-    size: usize,
-) -> anyhow::Result<()> {
-    let tasks = if task == "all" {
-        sim::task::list()
-    } else {
-        vec![sim::task::resolve(&task).map_err(|e| BadInput(e.to_string()))?]
-    };
-    let cfg = sim::generate::GenerateConfig {
-        episodes,
-        val,
-        seed,
-        workers,
-        image_size: size,
-        ..Default::default()
-    };
+/// Generates `cfg.episodes` episodes (of which `cfg.val` validation) of `task` into `out`; for a suite
+/// (`libero_mem`, `libero_goal`, `all` or a comma list) that many of every task, one subfolder
+/// each, and the suite's index over all of them (one multi-task dataset).
+pub fn run(task: String, out: PathBuf, cfg: sim::generate::GenerateConfig) -> anyhow::Result<()> {
+    let episodes = cfg.episodes;
+    let tasks = sim::pack::resolve_suites(&task, None).map_err(|e| BadInput(e.to_string()))?;
+    if tasks.is_empty() {
+        return Err(BadInput(format!("--task `{task}` names no task")).into());
+    }
+
     for t in &tasks {
         let dir = if tasks.len() > 1 {
-            out.join(t.id.replace('/', "_"))
+            out.join(sim::generate::suite_folder(t))
         } else {
             out.clone()
         };
@@ -63,6 +49,15 @@ pub fn run(
             steps,
             dir.display(),
             start.elapsed().as_secs_f64()
+        );
+    }
+    if tasks.len() > 1 {
+        let index = sim::generate::generate_suite(&tasks, &out, &cfg, &|_, _| {})?;
+        println!(
+            "suite index: {} episodes of {} tasks in {}",
+            index.episodes.len(),
+            tasks.len(),
+            out.display()
         );
     }
     Ok(())

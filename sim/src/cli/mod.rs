@@ -65,7 +65,8 @@ pub enum Command {
     },
     /// Record scripted-expert demonstrations as mcap episodes and write the dataset index.
     Generate {
-        /// Task id, or `all` (then one subfolder per task under --out).
+        /// Task id, or a suite (`libero_mem`, `libero_goal`, `all`, a comma list: one subfolder per
+        /// task under --out and one index over all of them).
         #[arg(long)]
         task: String,
         /// Episodes in total (train + validation).
@@ -86,6 +87,10 @@ pub enum Command {
         /// Camera image side.
         #[arg(long, default_value_t = 128)]
         size: usize,
+        /// A deterministic expert: no seeded variation (approach offsets, grasp choice, speed,
+        /// pauses) and no action noise, one demonstration per start state (unimodal targets).
+        #[arg(long)]
+        plain_expert: bool,
     },
     /// Render the agentview of every shipped task at one seed into a labelled contact sheet.
     Sheet {
@@ -264,7 +269,24 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
             out,
             workers,
             size,
-        } => generate::run(task, episodes, val, seed, out, workers, size),
+            plain_expert,
+        } => generate::run(
+            task,
+            out,
+            sim::generate::GenerateConfig {
+                episodes,
+                val,
+                seed,
+                workers,
+                image_size: size,
+                expert: if plain_expert {
+                    sim::generate::plain_expert()
+                } else {
+                    sim::expert::ExpertConfig::default()
+                },
+                ..Default::default()
+            },
+        ),
         Command::Sheet {
             out,
             seed,

@@ -59,6 +59,9 @@ pub struct GenerateConfig {
     pub image_size: usize,
     /// Episode writer options (image compression, chunking).
     pub writer: data::WriterOptions,
+    /// The expert's settings (default: seeded variation and action noise on; with both off,
+    /// one deterministic demonstration per start state — unimodal targets for imitation).
+    pub expert: crate::expert::ExpertConfig,
 }
 
 impl Default for GenerateConfig {
@@ -70,6 +73,7 @@ impl Default for GenerateConfig {
             workers: 1,
             image_size: 128,
             writer: data::WriterOptions::default(),
+            expert: crate::expert::ExpertConfig::default(),
         }
     }
 }
@@ -101,6 +105,15 @@ pub fn attempt_seed(seed: u64, k: u64, attempt: u64) -> u64 {
     z ^ (z >> 31)
 }
 
+/// The deterministic expert: no seeded variation and no action noise.
+pub fn plain_expert() -> crate::expert::ExpertConfig {
+    crate::expert::ExpertConfig {
+        action_noise: 0.0,
+        variation: false,
+        ..crate::expert::ExpertConfig::default()
+    }
+}
+
 /// Records one expert episode to `path`; `Ok(false)` (and no file) when the expert fails.
 pub fn record_episode(
     env: &mut Env,
@@ -108,9 +121,10 @@ pub fn record_episode(
     seed: u64,
     path: &Path,
     writer: data::WriterOptions,
+    expert: &crate::expert::ExpertConfig,
 ) -> Result<bool, GenerateError> {
     let mut obs = env.reset(seed)?;
-    let mut expert = Expert::new(task, seed);
+    let mut expert = Expert::with_config(task, seed, expert.clone());
     let mut rec = Recorder::create(path, env, task, seed, writer)?;
     let mut after_done = 0;
     for _ in 0..task.max_steps {
@@ -184,7 +198,7 @@ pub fn generate(
         let env = env.as_mut().expect("just built");
         for attempt in 0..MAX_ATTEMPTS {
             let seed = attempt_seed(cfg.seed, k as u64, attempt);
-            if record_episode(env, task, seed, &path, cfg.writer.clone())? {
+            if record_episode(env, task, seed, &path, cfg.writer.clone(), &cfg.expert)? {
                 report(&|p| {
                     p.successes += 1;
                     p.done += 1;
@@ -214,4 +228,36 @@ pub fn generate(
     )?;
     index.save(dir)?;
     Ok(index)
+}
+
+/// Generates a suite dataset: `cfg.episodes` episodes of every task of `tasks` into one subfolder
+/// per task under `dir` (each a dataset of its own, as [`generate`] writes it), then the suite's
+/// index over all of them (`dir/index.json`, episode files relative to `dir`), from which one
+/// multi-task policy trains. `on_progress` gets the task's position with its progress.
+pub fn generate_suite(
+    tasks: &[TaskSpec],
+    dir: &Path,
+    cfg: &GenerateConfig,
+    on_progress: &(dyn Fn(usize, GenerateProgress) + Sync),
+) -> Result<data::DatasetIndex, GenerateError> {
+    if tasks.is_empty() {
+        return Err(GenerateError::Argument("a suite of no tasks".into()));
+    }
+    for (i, t) in tasks.iter().enumerate() {
+        generate(t, &dir.join(suite_folder(t)), cfg, &|p| on_progress(i, p))?;
+    }
+    let index = data::build_index(
+        dir,
+        &data::IndexOptions {
+            val_fraction: cfg.val as f64 / cfg.episodes as f64,
+            seed: cfg.seed,
+        },
+    )?;
+    index.save(dir)?;
+    Ok(index)
+}
+
+/// The subfolder of a task in a suite dataset (`libero_mem/t3` → `libero_mem_t3`).
+pub fn suite_folder(task: &TaskSpec) -> String {
+    task.id.replace('/', "_")
 }

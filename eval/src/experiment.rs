@@ -1,0 +1,724 @@
+//! The paper's experiment in one command (`eval experiment FILE`): train every listed variant on
+//! every listed suite (by running the `train` binary next to this one, which resumes on its own),
+//! evaluate each trained policy on held-out seeds, and write the tables of the paper — LIBERO-Goal
+//! success (Table 2) and LIBERO-Mem subgoal completion (Table 3), per observation mode, with 95 %
+//! intervals — as Markdown, JSON, CSV and an SVG plot.
+//!
+//! Every finished step is kept on disk (the run's checkpoints, its `eval/results.json`), so an
+//! interrupted experiment continues where it stopped.
+//!
+//! ```toml
+//! name = "paper"
+//! out = "docs"              # results.md, results.json, results.csv, results.svg
+//! episodes = 20             # per task, seeds derived from `seed`
+//! seed = 1000
+//! full_budget = true
+//!
+//! [[runs]]
+//! obs = "state"
+//! suite = "libero_mem"      # the tasks evaluated (eval's --tasks syntax)
+//! config = "configs/state/libero_mem.toml"
+//! variants = ["e_slotssm_oracle", "e_slotssm", "slotvla_h1", "slotvla_h8", "dense"]
+//! ```
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+use serde::{Deserialize, Serialize};
+
+use crate::error::EvalError;
+use crate::report::{self, Results, TaskSummary};
+
+/// An experiment file.
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Experiment {
+    /// Name (prefix of every run directory, `runs/<name>_<obs>_<suite>_<variant>`).
+    pub name: String,
+    /// Folder of the tables (`results.md`, `.json`, `.csv`, `.svg`).
+    pub out: PathBuf,
+    /// Episodes per task.
+    #[serde(default = "twenty")]
+    pub episodes: usize,
+    /// Base seed of the evaluation episodes (held out: training episodes use seeds 0…).
+    #[serde(default)]
+    pub seed: u64,
+    /// Run every episode's whole step budget (upstream `mem_6`: over-repetition counts).
+    #[serde(default = "yes")]
+    pub full_budget: bool,
+    /// Evaluation worker threads.
+    #[serde(default = "one")]
+    pub workers: usize,
+    /// Folder of the run directories.
+    #[serde(default = "runs_dir")]
+    pub runs_dir: PathBuf,
+    /// What to train and evaluate.
+    pub runs: Vec<RunSpec>,
+}
+
+fn twenty() -> usize {
+    20
+}
+fn yes() -> bool {
+    true
+}
+fn one() -> usize {
+    1
+}
+fn runs_dir() -> PathBuf {
+    PathBuf::from("runs")
+}
+
+/// One group of runs: a training config trained once per variant.
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RunSpec {
+    /// Observation mode of the config (`state` or `pixels`): the table it goes to.
+    pub obs: String,
+    /// Tasks evaluated (`libero_mem`, `libero_goal`, `t1,t3`, …).
+    pub suite: String,
+    /// Training config (its `[model].variant` and `name` are replaced per run).
+    pub config: PathBuf,
+    /// Variants trained from it.
+    pub variants: Vec<String>,
+    /// Tag of the runs in the tables and their names (e.g. `windows` for an ablation).
+    #[serde(default)]
+    pub tag: Option<String>,
+    /// Further `KEY=VALUE` overrides given to `train --set`.
+    #[serde(default)]
+    pub set: Vec<String>,
+}
+
+/// One run of an experiment's plan.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Planned<'a> {
+    /// Its group.
+    pub spec: &'a RunSpec,
+    /// Run name (its directory under `runs_dir`).
+    pub name: String,
+    /// Variant trained.
+    pub variant: String,
+    /// Variant with the group's tag, as the tables show it.
+    pub label: String,
+}
+
+/// One trained and evaluated policy.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct RunResult {
+    /// Observation mode.
+    pub obs: String,
+    /// Variant name, with the tag (`e_slotssm+windows`).
+    pub variant: String,
+    /// Run directory.
+    pub run: String,
+    /// Wall time of training, seconds (from the run's metrics).
+    pub train_s: Option<f64>,
+    /// Training steps.
+    pub steps: Option<u64>,
+    /// Per-task rows.
+    pub tasks: Vec<TaskSummary>,
+}
+
+impl Experiment {
+    /// Reads an experiment file (errors name the file and the key).
+    pub fn load(path: &Path) -> Result<Experiment, EvalError> {
+        let bad = |message: String| EvalError::Input {
+            path: path.to_path_buf(),
+            message,
+        };
+        let text = std::fs::read_to_string(path).map_err(|e| bad(e.to_string()))?;
+        let x: Experiment = toml::from_str(&text).map_err(|e| bad(e.to_string()))?;
+        if x.episodes == 0 || x.workers == 0 {
+            return Err(bad("episodes and workers must be ≥ 1".into()));
+        }
+        for (i, r) in x.runs.iter().enumerate() {
+            if r.obs != "state" && r.obs != "pixels" {
+                return Err(bad(format!(
+                    "runs[{i}].obs: `{}`, expected `state` or `pixels`",
+                    r.obs
+                )));
+            }
+            if r.variants.is_empty() {
+                return Err(bad(format!("runs[{i}].variants: name at least one")));
+            }
+            if let Some(v) = r
+                .variants
+                .iter()
+                .find(|v| model::Variant::from_name(v).is_err())
+            {
+                return Err(bad(format!("runs[{i}].variants: unknown variant `{v}`")));
+            }
+        }
+        Ok(x)
+    }
+
+    /// Every (group, variant) pair, in file order.
+    pub fn plan(&self) -> Vec<Planned<'_>> {
+        let mut out = Vec::new();
+        for r in &self.runs {
+            for v in &r.variants {
+                let mut name = format!("{}_{}_{}_{}", self.name, r.obs, slug(&r.suite), v);
+                let mut label = v.clone();
+                if let Some(t) = &r.tag {
+                    name.push('_');
+                    name.push_str(&slug(t));
+                    label = format!("{v}+{t}");
+                }
+                out.push(Planned {
+                    spec: r,
+                    name,
+                    variant: v.clone(),
+                    label,
+                });
+            }
+        }
+        out
+    }
+}
+
+/// A name fit for a directory (`t1,t3` → `t1-t3`, `libero_goal/x` → `libero_goal-x`).
+fn slug(s: &str) -> String {
+    s.chars()
+        .map(|c| {
+            if c.is_ascii_alphanumeric() || c == '_' {
+                c
+            } else {
+                '-'
+            }
+        })
+        .collect()
+}
+
+/// Trains a run with the `train` binary found next to this executable (resuming on its own);
+/// its output goes to `RUN/train.log`.
+pub fn train(spec: &RunSpec, name: &str, variant: &str, runs_dir: &Path) -> Result<(), EvalError> {
+    let exe = std::env::current_exe().map_err(|e| EvalError::Argument(e.to_string()))?;
+    let bin = exe.with_file_name(format!("train{}", std::env::consts::EXE_SUFFIX));
+    if !bin.is_file() {
+        return Err(EvalError::Argument(format!(
+            "{}: the `train` binary is missing; build it beside eval (`cargo build --release -p train`)",
+            bin.display()
+        )));
+    }
+    let run = runs_dir.join(name);
+    std::fs::create_dir_all(&run).map_err(|e| EvalError::Output {
+        path: run.clone(),
+        message: e.to_string(),
+    })?;
+    let log_path = run.join("train.log");
+    let log = std::fs::OpenOptions::new()
+        .create(true)
+        .append(true)
+        .open(&log_path)
+        .map_err(|e| EvalError::Output {
+            path: log_path.clone(),
+            message: e.to_string(),
+        })?;
+    let err_log = log.try_clone().map_err(|e| EvalError::Output {
+        path: log_path.clone(),
+        message: e.to_string(),
+    })?;
+    let mut cmd = Command::new(&bin);
+    cmd.arg(&spec.config)
+        .arg("--quiet")
+        .arg("--run-dir")
+        .arg(&run)
+        .arg("--set")
+        .arg(format!("name=\"{name}\""))
+        .arg("--set")
+        .arg(format!("model.variant=\"{variant}\""));
+    for s in &spec.set {
+        cmd.arg("--set").arg(s);
+    }
+    let status = cmd
+        .stdout(log)
+        .stderr(err_log)
+        .status()
+        .map_err(|e| EvalError::Argument(format!("{}: {e}", bin.display())))?;
+    if !status.success() {
+        let tail = std::fs::read_to_string(&log_path).unwrap_or_default();
+        let last: Vec<&str> = tail.lines().rev().take(3).collect();
+        return Err(EvalError::Model(format!(
+            "training {name} failed ({status}); see {}: {}",
+            log_path.display(),
+            last.into_iter().rev().collect::<Vec<_>>().join(" / ")
+        )));
+    }
+    Ok(())
+}
+
+/// Training wall time (seconds) and steps of a run, from its `metrics.jsonl`.
+pub fn training_cost(run: &Path) -> (Option<f64>, Option<u64>) {
+    let Ok(text) = std::fs::read_to_string(run.join("metrics.jsonl")) else {
+        return (None, None);
+    };
+    let last = text
+        .lines()
+        .rev()
+        .find_map(|l| serde_json::from_str::<serde_json::Value>(l).ok());
+    match last {
+        Some(v) => (
+            v.get("time_s").and_then(serde_json::Value::as_f64),
+            v.get("step").and_then(serde_json::Value::as_u64),
+        ),
+        None => (None, None),
+    }
+}
+
+/// Task order of a table: LIBERO-Mem t1…t10 numerically, others by name.
+fn task_key(t: &str) -> (String, u32, String) {
+    let s = report::short(t);
+    let n = s
+        .strip_prefix('t')
+        .and_then(|d| d.parse::<u32>().ok())
+        .unwrap_or(u32::MAX);
+    (report::suite(t).to_string(), n, s.to_string())
+}
+
+/// `docs/results.json`: `{obs: {variant: {task: {completion, success, episodes}}}}`.
+pub fn results_json(runs: &[RunResult]) -> serde_json::Value {
+    let mut root: BTreeMap<String, BTreeMap<String, BTreeMap<String, serde_json::Value>>> =
+        BTreeMap::new();
+    for r in runs {
+        let v = root
+            .entry(r.obs.clone())
+            .or_default()
+            .entry(r.variant.clone())
+            .or_default();
+        for t in &r.tasks {
+            v.insert(
+                t.task.clone(),
+                serde_json::json!({
+                    "completion": round1(t.completion),
+                    "completion_ci95": round1(t.completion_ci95),
+                    "success": round1(t.success),
+                    "success_ci95": [round1(t.success_ci95[0]), round1(t.success_ci95[1])],
+                    "episodes": t.episodes,
+                }),
+            );
+        }
+    }
+    serde_json::to_value(root).unwrap_or_default()
+}
+
+fn round1(x: f64) -> f64 {
+    (x * 10.0).round() / 10.0
+}
+
+/// Mean over a suite's tasks of a run, with the 95 % half-width of the pooled episodes
+/// (normal approximation over per-task means: the tasks have equal episode counts).
+fn suite_mean(rows: &[&TaskSummary], f: impl Fn(&TaskSummary) -> (f64, f64)) -> (f64, f64) {
+    let n = rows.len().max(1) as f64;
+    let m = rows.iter().map(|r| f(r).0).sum::<f64>() / n;
+    let h = (rows.iter().map(|r| f(r).1.powi(2)).sum::<f64>()).sqrt() / n;
+    (m, h)
+}
+
+/// A table's number of a row, with its 95 % half-width.
+type Metric = fn(&TaskSummary) -> (f64, f64);
+
+/// The success half-width of a row (Wilson interval, halved).
+fn success_half(t: &TaskSummary) -> f64 {
+    (t.success_ci95[1] - t.success_ci95[0]) / 2.0
+}
+
+/// The tables: per observation mode, Table 3 (LIBERO-Mem completion) and Table 2 (LIBERO-Goal
+/// success), then other suites' completion and success, and the training cost of each run.
+pub fn markdown(x: &Experiment, runs: &[RunResult], missing: &[(String, String)]) -> String {
+    let mut s = format!(
+        "# Results: `{}`\n\n{} held-out episodes per task (seeds from {}), {}; mean ± 95 % \
+         interval half-width (completion: normal approximation; success: Wilson).\n\n",
+        x.name,
+        x.episodes,
+        x.seed,
+        if x.full_budget {
+            "full step budget (over-repetition counts, as upstream `mem_6`)"
+        } else {
+            "stopping at success"
+        }
+    );
+    let mut modes: Vec<&str> = runs.iter().map(|r| r.obs.as_str()).collect();
+    modes.dedup();
+    let mut seen = Vec::new();
+    for m in modes {
+        if seen.contains(&m) {
+            continue;
+        }
+        seen.push(m);
+        let of_mode: Vec<&RunResult> = runs.iter().filter(|r| r.obs == m).collect();
+        let mut suites: Vec<String> = of_mode
+            .iter()
+            .flat_map(|r| r.tasks.iter().map(|t| report::suite(&t.task).to_string()))
+            .collect();
+        suites.sort();
+        suites.dedup();
+        // LIBERO-Mem first (Table 3), then LIBERO-Goal (Table 2), then the rest.
+        suites.sort_by_key(|s| match s.as_str() {
+            "libero_mem" => 0,
+            "libero_goal" => 1,
+            _ => 2,
+        });
+        for suite in suites {
+            let (metric, title): (Metric, &str) = match suite.as_str() {
+                "libero_goal" => (|t| (t.success, success_half(t)), "success (%) — Table 2"),
+                "libero_mem" => (
+                    |t| (t.completion, t.completion_ci95),
+                    "subgoal completion (%) — Table 3",
+                ),
+                _ => (
+                    |t| (t.completion, t.completion_ci95),
+                    "subgoal completion (%)",
+                ),
+            };
+            let mut tasks: Vec<String> = of_mode
+                .iter()
+                .flat_map(|r| r.tasks.iter())
+                .filter(|t| report::suite(&t.task) == suite)
+                .map(|t| t.task.clone())
+                .collect();
+            tasks.sort_by_key(|t| task_key(t));
+            tasks.dedup();
+            s.push_str(&format!("## {m} mode: {suite} {title}\n\n| variant |"));
+            for t in &tasks {
+                s.push_str(&format!(" {} |", report::short(t)));
+            }
+            s.push_str(" mean |\n|---|");
+            for _ in &tasks {
+                s.push_str("---:|");
+            }
+            s.push_str("---:|\n");
+            for r in &of_mode {
+                let rows: Vec<&TaskSummary> = r
+                    .tasks
+                    .iter()
+                    .filter(|t| report::suite(&t.task) == suite)
+                    .collect();
+                if rows.is_empty() {
+                    continue;
+                }
+                s.push_str(&format!("| {} |", r.variant));
+                for t in &tasks {
+                    match rows.iter().find(|x| &x.task == t) {
+                        Some(row) => {
+                            let (v, h) = metric(row);
+                            s.push_str(&format!(" {v:.0} ± {h:.0} |"));
+                        }
+                        None => s.push_str(" – |"),
+                    }
+                }
+                let (mv, mh) = suite_mean(&rows, metric);
+                s.push_str(&format!(" **{mv:.1}** ± {mh:.1} |\n"));
+            }
+            // The other metric's means, for reference.
+            s.push('\n');
+        }
+        // Success / completion means of every run of this mode.
+        s.push_str(&format!(
+            "### {m} mode: means and training cost\n\n| variant | suite | completion | success | train steps | train time |\n|---|---|---:|---:|---:|---:|\n"
+        ));
+        for r in &of_mode {
+            let mut suites: Vec<&str> = r.tasks.iter().map(|t| report::suite(&t.task)).collect();
+            suites.dedup();
+            for suite in suites {
+                let rows: Vec<&TaskSummary> = r
+                    .tasks
+                    .iter()
+                    .filter(|t| report::suite(&t.task) == suite)
+                    .collect();
+                let (c, ch) = suite_mean(&rows, |t| (t.completion, t.completion_ci95));
+                let (sc, sh) = suite_mean(&rows, |t| (t.success, success_half(t)));
+                s.push_str(&format!(
+                    "| {} | {suite} | {c:.1} ± {ch:.1} | {sc:.1} ± {sh:.1} | {} | {} |\n",
+                    r.variant,
+                    r.steps.map_or("–".into(), |v| v.to_string()),
+                    r.train_s
+                        .map_or("–".into(), |v| format!("{:.1} min", v / 60.0)),
+                ));
+            }
+        }
+        s.push('\n');
+    }
+    if !missing.is_empty() {
+        s.push_str("## Not trained\n\n");
+        for (obs, v) in missing {
+            s.push_str(&format!("- {obs} mode: {v}\n"));
+        }
+        s.push('\n');
+    }
+    s
+}
+
+/// `docs/results.csv`: one row per (mode, variant, task).
+pub fn csv(runs: &[RunResult]) -> String {
+    let mut s = String::from(
+        "obs,variant,task,episodes,completion,completion_ci95,success,success_lo,success_hi,over_repetition\n",
+    );
+    for r in runs {
+        for t in &r.tasks {
+            s.push_str(&format!(
+                "{},{},{},{},{:.2},{:.2},{:.2},{:.2},{:.2},{}\n",
+                r.obs,
+                r.variant,
+                t.task,
+                t.episodes,
+                t.completion,
+                t.completion_ci95,
+                t.success,
+                t.success_ci95[0],
+                t.success_ci95[1],
+                t.over_repetition
+            ));
+        }
+    }
+    s
+}
+
+/// `docs/results.svg`: subgoal completion per task (grouped bars, one colour per variant, error
+/// bars at the 95 % interval), one panel per observation mode. Written by hand: a few rectangles
+/// and labels (a plotting crate would need system fonts).
+pub fn svg(runs: &[RunResult]) -> String {
+    const COLORS: [&str; 8] = [
+        "#1f77b4", "#ff7f0e", "#2ca02c", "#d62728", "#9467bd", "#8c564b", "#e377c2", "#7f7f7f",
+    ];
+    let mut modes: Vec<&str> = runs.iter().map(|r| r.obs.as_str()).collect();
+    modes.sort();
+    modes.dedup();
+    let mut variants: Vec<&str> = Vec::new();
+    for r in runs {
+        if !variants.contains(&r.variant.as_str()) {
+            variants.push(&r.variant);
+        }
+    }
+    let panel_h = 260.0;
+    let (left, top) = (50.0, 30.0);
+    let mut body = String::new();
+    let mut width: f64 = 600.0;
+    for (pi, m) in modes.iter().enumerate() {
+        let of_mode: Vec<&RunResult> = runs.iter().filter(|r| &r.obs == m).collect();
+        let mut tasks: Vec<String> = of_mode
+            .iter()
+            .flat_map(|r| r.tasks.iter().map(|t| t.task.clone()))
+            .collect();
+        tasks.sort_by_key(|t| task_key(t));
+        tasks.dedup();
+        let group = (variants.len() as f64 * 8.0 + 10.0).max(30.0);
+        width = width.max(left + tasks.len() as f64 * group + 180.0);
+        let y0 = top + pi as f64 * (panel_h + 60.0);
+        let scale = |v: f64| y0 + panel_h - v / 100.0 * panel_h;
+        body.push_str(&format!(
+            "<text x=\"{left}\" y=\"{}\" font-size=\"14\">{m} mode: subgoal completion (%)</text>\n",
+            y0 - 10.0
+        ));
+        for g in [0.0, 25.0, 50.0, 75.0, 100.0] {
+            body.push_str(&format!(
+                "<line x1=\"{left}\" x2=\"{}\" y1=\"{y}\" y2=\"{y}\" stroke=\"#ddd\"/><text x=\"{}\" y=\"{}\" font-size=\"10\" text-anchor=\"end\">{g:.0}</text>\n",
+                left + tasks.len() as f64 * group,
+                left - 4.0,
+                scale(g) + 3.0,
+                y = scale(g)
+            ));
+        }
+        for (ti, t) in tasks.iter().enumerate() {
+            let gx = left + ti as f64 * group + 5.0;
+            for (vi, v) in variants.iter().enumerate() {
+                let Some(row) = of_mode
+                    .iter()
+                    .filter(|r| r.variant == *v)
+                    .flat_map(|r| r.tasks.iter())
+                    .find(|x| &x.task == t)
+                else {
+                    continue;
+                };
+                let x = gx + vi as f64 * 8.0;
+                let y = scale(row.completion);
+                let c = COLORS[vi % COLORS.len()];
+                body.push_str(&format!(
+                    "<rect x=\"{x:.1}\" y=\"{y:.1}\" width=\"7\" height=\"{:.1}\" fill=\"{c}\"/>\n",
+                    y0 + panel_h - y
+                ));
+                let (lo, hi) = (
+                    (row.completion - row.completion_ci95).max(0.0),
+                    (row.completion + row.completion_ci95).min(100.0),
+                );
+                body.push_str(&format!(
+                    "<line x1=\"{:.1}\" x2=\"{:.1}\" y1=\"{:.1}\" y2=\"{:.1}\" stroke=\"#333\"/>\n",
+                    x + 3.5,
+                    x + 3.5,
+                    scale(lo),
+                    scale(hi)
+                ));
+            }
+            body.push_str(&format!(
+                "<text x=\"{:.1}\" y=\"{:.1}\" font-size=\"10\" text-anchor=\"middle\">{}</text>\n",
+                gx + variants.len() as f64 * 4.0,
+                y0 + panel_h + 14.0,
+                report::short(t)
+            ));
+        }
+    }
+    let lx = width - 170.0;
+    for (vi, v) in variants.iter().enumerate() {
+        body.push_str(&format!(
+            "<rect x=\"{lx}\" y=\"{}\" width=\"10\" height=\"10\" fill=\"{}\"/><text x=\"{}\" y=\"{}\" font-size=\"11\">{v}</text>\n",
+            top + vi as f64 * 16.0,
+            COLORS[vi % COLORS.len()],
+            lx + 14.0,
+            top + vi as f64 * 16.0 + 9.0
+        ));
+    }
+    let height = top + modes.len().max(1) as f64 * (panel_h + 60.0);
+    format!(
+        "<svg xmlns=\"http://www.w3.org/2000/svg\" width=\"{width:.0}\" height=\"{height:.0}\" font-family=\"sans-serif\">\n<rect width=\"100%\" height=\"100%\" fill=\"white\"/>\n{body}</svg>\n"
+    )
+}
+
+/// Loads a finished run's evaluation (None when it has not been evaluated with the
+/// experiment's protocol).
+pub fn load_result(x: &Experiment, run: &Path, obs: &str, label: &str) -> Option<RunResult> {
+    let (_, r) = Results::load(&run.join("eval")).ok()?;
+    if r.episodes_per_task != x.episodes || r.seed != x.seed || r.full_budget != x.full_budget {
+        return None;
+    }
+    let (train_s, steps) = training_cost(run);
+    Some(RunResult {
+        obs: obs.to_string(),
+        variant: label.to_string(),
+        run: run.display().to_string(),
+        train_s,
+        steps: steps.map(|s| s + 1),
+        tasks: r.tasks,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn row(task: &str, completion: f64, success: f64) -> TaskSummary {
+        TaskSummary {
+            task: task.into(),
+            episodes: 20,
+            completion,
+            completion_ci95: 5.0,
+            success,
+            success_ci95: [success - 10.0, success + 10.0],
+            mean_steps: 100.0,
+            over_repetition: 0,
+        }
+    }
+
+    #[test]
+    fn experiment_files_parse_plan_and_name_bad_keys() {
+        let dir = tempfile::tempdir().unwrap();
+        let p = dir.path().join("x.toml");
+        std::fs::write(
+            &p,
+            "name = \"paper\"\nout = \"docs\"\n[[runs]]\nobs = \"state\"\nsuite = \"t1,t3\"\nconfig = \"c.toml\"\nvariants = [\"e_slotssm\", \"slotvla_h1\"]\n[[runs]]\nobs = \"state\"\nsuite = \"libero_mem\"\nconfig = \"c.toml\"\nvariants = [\"e_slotssm\"]\ntag = \"windows\"\nset = [\"train.sampling=windows\"]\n",
+        )
+        .unwrap();
+        let x = Experiment::load(&p).unwrap();
+        assert_eq!((x.episodes, x.full_budget, x.workers), (20, true, 1));
+        let plan: Vec<(String, String)> = x.plan().into_iter().map(|p| (p.name, p.label)).collect();
+        assert_eq!(
+            plan,
+            [
+                ("paper_state_t1-t3_e_slotssm".into(), "e_slotssm".into()),
+                ("paper_state_t1-t3_slotvla_h1".into(), "slotvla_h1".into()),
+                (
+                    "paper_state_libero_mem_e_slotssm_windows".into(),
+                    "e_slotssm+windows".into()
+                ),
+            ]
+        );
+        std::fs::write(&p, "name = \"x\"\nout = \"d\"\nrunz = []\n").unwrap();
+        let e = Experiment::load(&p).unwrap_err().to_string();
+        assert!(e.contains("runz") && e.contains("x.toml"), "{e}");
+        std::fs::write(
+            &p,
+            "name = \"x\"\nout = \"d\"\n[[runs]]\nobs = \"state\"\nsuite = \"t1\"\nconfig = \"c\"\nvariants = [\"slotssm\"]\n",
+        )
+        .unwrap();
+        let e = Experiment::load(&p).unwrap_err().to_string();
+        assert!(e.contains("unknown variant `slotssm`"), "{e}");
+    }
+
+    #[test]
+    fn tables_json_and_plot_hold_every_run() {
+        let x = Experiment {
+            name: "p".into(),
+            out: "d".into(),
+            episodes: 20,
+            seed: 1000,
+            full_budget: true,
+            workers: 1,
+            runs_dir: "runs".into(),
+            runs: vec![],
+        };
+        let runs = vec![
+            RunResult {
+                obs: "state".into(),
+                variant: "e_slotssm".into(),
+                run: "runs/a".into(),
+                train_s: Some(600.0),
+                steps: Some(3000),
+                tasks: vec![
+                    row("libero_mem/t10", 50.0, 40.0),
+                    row("libero_mem/t2", 100.0, 100.0),
+                    row(
+                        "libero_goal/open_the_middle_drawer_of_the_cabinet",
+                        90.0,
+                        95.0,
+                    ),
+                ],
+            },
+            RunResult {
+                obs: "state".into(),
+                variant: "slotvla_h1".into(),
+                run: "runs/b".into(),
+                train_s: None,
+                steps: None,
+                tasks: vec![row("libero_mem/t2", 20.0, 10.0)],
+            },
+        ];
+        let md = markdown(&x, &runs, &[("pixels".into(), "dense".into())]);
+        // Table 3 lists t2 before t10, with the mean of the run's LIBERO-Mem tasks.
+        let t3 = md.find("libero_mem subgoal completion").unwrap();
+        let line = md[t3..]
+            .lines()
+            .find(|l| l.starts_with("| e_slotssm |"))
+            .unwrap();
+        assert_eq!(line, "| e_slotssm | 100 ± 5 | 50 ± 5 | **75.0** ± 3.5 |");
+        let line = md[t3..]
+            .lines()
+            .find(|l| l.starts_with("| slotvla_h1 |"))
+            .unwrap();
+        assert_eq!(line, "| slotvla_h1 | 20 ± 5 | – | **20.0** ± 5.0 |");
+        // Table 2 reports success.
+        let t2 = md.find("libero_goal success").unwrap();
+        let line = md[t2..]
+            .lines()
+            .find(|l| l.starts_with("| e_slotssm |"))
+            .unwrap();
+        assert_eq!(line, "| e_slotssm | 95 ± 10 | **95.0** ± 10.0 |");
+        assert!(
+            md.contains("| e_slotssm | libero_mem | 75.0 ± 3.5 | 70.0 ± 7.1 | 3000 | 10.0 min |"),
+            "{md}"
+        );
+        assert!(md.contains("- pixels mode: dense"));
+        let j = results_json(&runs);
+        assert_eq!(
+            j["state"]["e_slotssm"]["libero_mem/t10"]["completion"],
+            50.0
+        );
+        assert_eq!(j["state"]["slotvla_h1"]["libero_mem/t2"]["episodes"], 20);
+        assert_eq!(csv(&runs).lines().count(), 5);
+        let svg = svg(&runs);
+        assert!(svg.starts_with("<svg") && svg.trim_end().ends_with("</svg>"));
+        assert_eq!(
+            svg.matches("<rect x=").count(),
+            4 + 2,
+            "4 bars + 2 legend boxes"
+        );
+    }
+}
