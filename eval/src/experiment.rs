@@ -432,8 +432,11 @@ pub fn markdown(x: &Experiment, runs: &[RunResult], missing: &[(String, String)]
                     "| {} | {suite} | {c:.1} ± {ch:.1} | {sc:.1} ± {sh:.1} | {} | {} |\n",
                     r.variant,
                     r.steps.map_or("–".into(), |v| v.to_string()),
-                    r.train_s
-                        .map_or("–".into(), |v| format!("{:.1} min", v / 60.0)),
+                    r.train_s.map_or("–".into(), |v| if v < 120.0 {
+                        format!("{v:.0} s")
+                    } else {
+                        format!("{:.1} min", v / 60.0)
+                    }),
                 ));
             }
         }
@@ -586,7 +589,7 @@ pub fn load_result(x: &Experiment, run: &Path, obs: &str, label: &str) -> Option
         variant: label.to_string(),
         run: run.display().to_string(),
         train_s,
-        steps: steps.map(|s| s + 1),
+        steps,
         tasks: r.tasks,
     })
 }
