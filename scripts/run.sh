@@ -12,5 +12,7 @@ cargo build -q -p sim -p train -p eval
 BIN=target/debug
 "$BIN/sim" info
 "$BIN/sim" render --out out/agentview.png --task t1 --seed 0 --size 128
+# A fresh run each time: a runs/tiny left by an older build may hold another model's weights.
+rm -rf runs/tiny
 "$BIN/train" configs/tiny.toml --run-dir runs/tiny
 "$BIN/eval" --run runs/tiny --tasks t1 --episodes 2 --workers 2
