@@ -338,14 +338,7 @@ pub fn markdown(x: &Experiment, runs: &[RunResult], missing: &[(String, String)]
             "stopping at success"
         }
     );
-    let mut modes: Vec<&str> = runs.iter().map(|r| r.obs.as_str()).collect();
-    modes.dedup();
-    let mut seen = Vec::new();
-    for m in modes {
-        if seen.contains(&m) {
-            continue;
-        }
-        seen.push(m);
+    for m in report::first_seen(runs.iter().map(|r| r.obs.as_str())) {
         let of_mode: Vec<&RunResult> = runs.iter().filter(|r| r.obs == m).collect();
         let mut suites: Vec<String> = of_mode
             .iter()
@@ -410,7 +403,6 @@ pub fn markdown(x: &Experiment, runs: &[RunResult], missing: &[(String, String)]
                 let (mv, mh) = suite_mean(&rows, metric);
                 s.push_str(&format!(" **{mv:.1}** ± {mh:.1} |\n"));
             }
-            // The other metric's means, for reference.
             s.push('\n');
         }
         // Success / completion means of every run of this mode.
@@ -418,9 +410,7 @@ pub fn markdown(x: &Experiment, runs: &[RunResult], missing: &[(String, String)]
             "### {m} mode: means and training cost\n\n| variant | suite | completion | success | train steps | train time |\n|---|---|---:|---:|---:|---:|\n"
         ));
         for r in &of_mode {
-            let mut suites: Vec<&str> = r.tasks.iter().map(|t| report::suite(&t.task)).collect();
-            suites.dedup();
-            for suite in suites {
+            for suite in report::first_seen(r.tasks.iter().map(|t| report::suite(&t.task))) {
                 let rows: Vec<&TaskSummary> = r
                     .tasks
                     .iter()
@@ -487,12 +477,7 @@ pub fn svg(runs: &[RunResult]) -> String {
     let mut modes: Vec<&str> = runs.iter().map(|r| r.obs.as_str()).collect();
     modes.sort();
     modes.dedup();
-    let mut variants: Vec<&str> = Vec::new();
-    for r in runs {
-        if !variants.contains(&r.variant.as_str()) {
-            variants.push(&r.variant);
-        }
-    }
+    let variants = report::first_seen(runs.iter().map(|r| r.variant.as_str()));
     let panel_h = 260.0;
     let (left, top) = (50.0, 30.0);
     let mut body = String::new();

@@ -169,7 +169,7 @@ fn by_suite<'a, T>(
 }
 
 /// Distinct strings in first-seen order.
-fn first_seen<'a>(items: impl IntoIterator<Item = &'a str>) -> Vec<&'a str> {
+pub(crate) fn first_seen<'a>(items: impl IntoIterator<Item = &'a str>) -> Vec<&'a str> {
     let mut out: Vec<&str> = Vec::new();
     for s in items {
         if !out.contains(&s) {

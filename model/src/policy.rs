@@ -770,34 +770,47 @@ mod tests {
         assert_ne!(a, c);
     }
 
-    #[test]
-    fn tiny_model_overfits_one_batch() {
+    /// Trains `model` on the one batch `x` (AdamW without decay, global-norm clip 1) for up to
+    /// `steps` steps at `lr`, stopping once L_act falls below `stop` × its first value; returns
+    /// the model, the first and the last L_act measured, and the steps taken.
+    fn fit_one_batch(
+        mut model: PolicyModel,
+        x: &WindowBatch,
+        steps: usize,
+        lr: f64,
+        stop: f32,
+    ) -> (PolicyModel, f32, f32, usize) {
         use burn::grad_clipping::GradientClippingConfig;
         use burn::optim::{AdamWConfig, GradientsParams};
-        let (_guard, device) = test_autodiff_device();
-        device.seed(3);
-        let cfg = micro("e_slotssm");
-        let mut model = PolicyModel::new(&cfg, &device).unwrap();
-        let x = batch(&cfg, 2, 4, &device);
         let mut optim = AdamWConfig::new()
             .with_weight_decay(0.0)
             .with_grad_clipping(Some(GradientClippingConfig::Norm(1.0)))
             .init();
         let mut first = None;
         let mut last = f32::INFINITY;
-        for step in 0..400 {
-            let (_, losses) = model.forward(&x).unwrap();
+        for step in 0..steps {
+            let (_, losses) = model.forward(x).unwrap();
             let act = scalar(losses.action.clone());
             let initial = *first.get_or_insert(act);
             last = act;
-            if act < 0.1 * initial {
-                eprintln!("overfit: L_act {initial:.4} → {act:.4} in {step} steps");
-                break;
+            if act < stop * initial {
+                return (model, initial, last, step);
             }
             let grads = GradientsParams::from_grads(losses.total.backward(), &model);
-            model = optim.step(1e-3, model, grads);
+            model = optim.step(lr, model, grads);
         }
-        let initial = first.unwrap();
+        (model, first.unwrap_or(last), last, steps)
+    }
+
+    #[test]
+    fn tiny_model_overfits_one_batch() {
+        let (_guard, device) = test_autodiff_device();
+        device.seed(3);
+        let cfg = micro("e_slotssm");
+        let model = PolicyModel::new(&cfg, &device).unwrap();
+        let x = batch(&cfg, 2, 4, &device);
+        let (model, initial, last, steps) = fit_one_batch(model, &x, 400, 1e-3, 0.1);
+        eprintln!("overfit: L_act {initial:.4} → {last:.4} in {steps} steps");
         assert!(last < 0.1 * initial, "L_act {initial} → {last}");
 
         // The trained weights act through the streaming policy too (autodiff device given).
@@ -831,13 +844,11 @@ mod tests {
     #[test]
     fn state_model_learns_from_the_object_tokens() {
         use crate::io::state::FEATURES;
-        use burn::grad_clipping::GradientClippingConfig;
-        use burn::optim::{AdamWConfig, GradientsParams};
         let (_guard, device) = test_autodiff_device();
         device.seed(5);
         for variant in ["e_slotssm_oracle", "slotvla_h1"] {
             let cfg = micro(variant).with_state(4, 6);
-            let mut model = PolicyModel::new(&cfg, &device).unwrap();
+            let model = PolicyModel::new(&cfg, &device).unwrap();
             let (b, t) = (4, 4);
             let mut x = batch(&cfg, b, t, &device);
             let feats =
@@ -870,21 +881,7 @@ mod tests {
             x.subgoal = variant
                 .ends_with("oracle")
                 .then(|| Tensor::ones([b, t, 4, cfg.text.max_len], &device));
-            let mut optim = AdamWConfig::new()
-                .with_weight_decay(0.0)
-                .with_grad_clipping(Some(GradientClippingConfig::Norm(1.0)))
-                .init();
-            let mut first = None;
-            let mut last = f32::INFINITY;
-            for _ in 0..300 {
-                let (_, losses) = model.forward(&x).unwrap();
-                let act = scalar(losses.action.clone());
-                first.get_or_insert(act);
-                last = act;
-                let grads = GradientsParams::from_grads(losses.total.backward(), &model);
-                model = optim.step(2e-3, model, grads);
-            }
-            let initial = first.unwrap();
+            let (_, initial, last, _) = fit_one_batch(model, &x, 300, 2e-3, 0.0);
             eprintln!("{variant}: L_act {initial} → {last}");
             assert!(last < 0.3 * initial, "{variant}: L_act {initial} → {last}");
         }

@@ -219,15 +219,7 @@ pub fn generate(
         work,
         || GenerateError::Argument("a generation worker panicked".into()),
     )?;
-    let index = data::build_index(
-        dir,
-        &data::IndexOptions {
-            val_fraction: cfg.val as f64 / cfg.episodes as f64,
-            seed: cfg.seed,
-        },
-    )?;
-    index.save(dir)?;
-    Ok(index)
+    write_index(dir, cfg)
 }
 
 /// Generates a suite dataset: `cfg.episodes` episodes of every task of `tasks` into one subfolder
@@ -246,15 +238,19 @@ pub fn generate_suite(
     for (i, t) in tasks.iter().enumerate() {
         generate(t, &dir.join(suite_folder(t)), cfg, &|p| on_progress(i, p))?;
     }
-    let index = data::build_index(
+    write_index(dir, cfg)
+}
+
+/// Builds and writes `dir/index.json` over the episodes of `dir` and of its subfolders, with
+/// `cfg`'s validation share and seed.
+pub fn write_index(dir: &Path, cfg: &GenerateConfig) -> Result<data::DatasetIndex, GenerateError> {
+    Ok(data::build_index(
         dir,
         &data::IndexOptions {
             val_fraction: cfg.val as f64 / cfg.episodes as f64,
             seed: cfg.seed,
         },
-    )?;
-    index.save(dir)?;
-    Ok(index)
+    )?)
 }
 
 /// The subfolder of a task in a suite dataset (`libero_mem/t3` → `libero_mem_t3`).
