@@ -410,6 +410,9 @@ pub fn state_spec(dir: &Path, index: &DatasetIndex) -> Result<StateSpec> {
             }
             Ok(stats)
         })
+        .collect::<Vec<Result<StateStats>>>()
+        // In index order, so the error names the first bad episode whatever the threads did.
+        .into_iter()
         .collect::<Result<Vec<_>>>()?;
     let mut all = StateStats::default();
     for s in &stats {
