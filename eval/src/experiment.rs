@@ -631,6 +631,28 @@ mod tests {
         assert!(e.contains("unknown variant `slotssm`"), "{e}");
     }
 
+    /// Every shipped experiment file loads, and the training configs it names exist.
+    #[test]
+    fn shipped_experiment_files_load() {
+        let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
+        let mut names = vec![];
+        for e in std::fs::read_dir(root.join("configs/experiments")).unwrap() {
+            let p = e.unwrap().path();
+            let x = Experiment::load(&p).unwrap_or_else(|e| panic!("{e}"));
+            for r in &x.runs {
+                assert!(
+                    root.join(&r.config).is_file(),
+                    "{}: {}",
+                    p.display(),
+                    r.config.display()
+                );
+            }
+            names.push(x.name);
+        }
+        names.sort();
+        assert_eq!(names, ["paper", "t1"]);
+    }
+
     #[test]
     fn tables_json_and_plot_hold_every_run() {
         let x = Experiment {
