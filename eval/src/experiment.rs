@@ -248,6 +248,47 @@ pub fn train(spec: &RunSpec, name: &str, variant: &str, runs_dir: &Path) -> Resu
     Ok(())
 }
 
+/// Whether the dataset that `spec`'s training config reads is already recorded (`[data].dir` holds an
+/// `index.json`; relative to the working directory, as `train` reads it). False when the config
+/// cannot be read or a `set` override touches `[data]` (the caller then plays safe).
+pub fn dataset_ready(spec: &RunSpec) -> bool {
+    if spec.set.iter().any(|s| s.trim_start().starts_with("data.")) {
+        return false;
+    }
+    let Ok(text) = std::fs::read_to_string(&spec.config) else {
+        return false;
+    };
+    let Ok(value) = text.parse::<toml::Table>() else {
+        return false;
+    };
+    value
+        .get("data")
+        .and_then(|d| d.get("dir"))
+        .and_then(|d| d.as_str())
+        .is_some_and(|dir| Path::new(dir).join("index.json").is_file())
+}
+
+/// Orders the runs still to train for `--jobs`: first, one at a time, the first run of every
+/// config whose dataset is not recorded yet (its `train` generates it; two at once would both
+/// write into the same folder); then the rest, which may train side by side.
+pub fn training_waves<'a, 'b>(
+    todo: &[&'b Planned<'a>],
+    ready: impl Fn(&RunSpec) -> bool,
+) -> (Vec<&'b Planned<'a>>, Vec<&'b Planned<'a>>) {
+    let (mut alone, mut side_by_side) = (Vec::new(), Vec::new());
+    let mut generating: Vec<&Path> = Vec::new();
+    for &p in todo {
+        let config = p.spec.config.as_path();
+        if !ready(p.spec) && !generating.contains(&config) {
+            generating.push(config);
+            alone.push(p);
+        } else {
+            side_by_side.push(p);
+        }
+    }
+    (alone, side_by_side)
+}
+
 /// Training wall time (seconds) and steps of a run, from its `metrics.jsonl`.
 pub fn training_cost(run: &Path) -> (Option<f64>, Option<u64>) {
     let Ok(text) = std::fs::read_to_string(run.join("metrics.jsonl")) else {
@@ -629,6 +670,62 @@ mod tests {
         .unwrap();
         let e = Experiment::load(&p).unwrap_err().to_string();
         assert!(e.contains("unknown variant `slotssm`"), "{e}");
+    }
+
+    /// With `--jobs`, the first run of a config whose dataset is missing trains alone, first.
+    #[test]
+    fn runs_that_generate_their_dataset_train_alone_first() {
+        let dir = tempfile::tempdir().unwrap();
+        let p = dir.path().join("x.toml");
+        std::fs::write(
+            &p,
+            "name = \"x\"\nout = \"d\"\n[[runs]]\nobs = \"state\"\nsuite = \"t1\"\nconfig = \"a.toml\"\nvariants = [\"e_slotssm\", \"slotvla_h1\", \"dense\"]\n[[runs]]\nobs = \"state\"\nsuite = \"t3\"\nconfig = \"b.toml\"\nvariants = [\"e_slotssm\", \"dense\"]\n",
+        )
+        .unwrap();
+        let x = Experiment::load(&p).unwrap();
+        let plan = x.plan();
+        let todo: Vec<&Planned> = plan.iter().collect();
+        let names = |v: Vec<&Planned>| v.into_iter().map(|p| p.name.clone()).collect::<Vec<_>>();
+        // a.toml's dataset is missing, b.toml's is there.
+        let (alone, rest) = training_waves(&todo, |s| s.config.ends_with("b.toml"));
+        assert_eq!(names(alone), ["x_state_t1_e_slotssm"]);
+        assert_eq!(
+            names(rest),
+            [
+                "x_state_t1_slotvla_h1",
+                "x_state_t1_dense",
+                "x_state_t3_e_slotssm",
+                "x_state_t3_dense"
+            ]
+        );
+        let (alone, rest) = training_waves(&todo, |_| false);
+        assert_eq!(
+            names(alone),
+            ["x_state_t1_e_slotssm", "x_state_t3_e_slotssm"]
+        );
+        assert_eq!(rest.len(), 3);
+        // Every dataset there: everything may train side by side.
+        let (alone, rest) = training_waves(&todo, |_| true);
+        assert!(alone.is_empty() && rest.len() == 5);
+        // dataset_ready reads [data].dir of the config (relative to the working directory).
+        let cfg = dir.path().join("c.toml");
+        let data = dir.path().join("ds");
+        std::fs::create_dir_all(&data).unwrap();
+        std::fs::write(
+            &cfg,
+            format!("[data]\ndir = {:?}\n", data.display().to_string()),
+        )
+        .unwrap();
+        let mut spec = x.runs[0].clone();
+        spec.config = cfg.clone();
+        assert!(!dataset_ready(&spec));
+        std::fs::write(data.join("index.json"), "{}").unwrap();
+        assert!(dataset_ready(&spec));
+        spec.set = vec!["data.dir=\"elsewhere\"".into()];
+        assert!(!dataset_ready(&spec), "a [data] override plays safe");
+        spec.set.clear();
+        spec.config = dir.path().join("missing.toml");
+        assert!(!dataset_ready(&spec));
     }
 
     /// Every shipped experiment file loads, and the training configs it names exist.

@@ -67,6 +67,10 @@ enum Command {
         /// No progress bar.
         #[arg(long)]
         quiet: bool,
+        /// Trainings at once (each `train` keeps about one core busy); the first run of a config
+        /// whose dataset is not recorded yet trains alone first, as it generates the dataset.
+        #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u64).range(1..))]
+        jobs: u64,
     },
     /// Temporal scaling: evaluate the repetition family at several repetition counts N.
     Scaling {
@@ -149,7 +153,8 @@ fn main() -> ExitCode {
             file,
             tables_only,
             quiet,
-        }) => experiment(&file, tables_only, quiet),
+            jobs,
+        }) => experiment(&file, tables_only, quiet, jobs as usize),
         None => evaluate(&cli.eval),
     };
     match result {
@@ -378,7 +383,12 @@ fn compare(paths: &[PathBuf], out: Option<PathBuf>) -> anyhow::Result<()> {
     Ok(())
 }
 
-fn experiment(file: &std::path::Path, tables_only: bool, quiet: bool) -> anyhow::Result<()> {
+fn experiment(
+    file: &std::path::Path,
+    tables_only: bool,
+    quiet: bool,
+    jobs: usize,
+) -> anyhow::Result<()> {
     use eval::experiment::{self as exp, Experiment};
     let x = Experiment::load(file)?;
     let plan = x.plan();
@@ -408,6 +418,37 @@ fn experiment(file: &std::path::Path, tables_only: bool, quiet: bool) -> anyhow:
             Ok(())
         };
     let started = std::time::Instant::now();
+    // With --jobs N, every run still to train is trained first (N at once), then each is evaluated.
+    let mut trained = std::collections::BTreeSet::new();
+    if jobs > 1 && !tables_only {
+        let todo: Vec<&exp::Planned> = plan
+            .iter()
+            .filter(|p| {
+                exp::load_result(&x, &x.runs_dir.join(&p.name), &p.spec.obs, &p.label).is_none()
+            })
+            .collect();
+        let (alone, side_by_side) = exp::training_waves(&todo, exp::dataset_ready);
+        for p in &alone {
+            bar.set_message(format!("{}: training (generates its dataset)", p.name));
+            exp::train(p.spec, &p.name, &p.variant, &x.runs_dir)?;
+        }
+        bar.set_message(format!(
+            "training {} runs, {} at once",
+            side_by_side.len(),
+            jobs
+        ));
+        data::pool::for_each(
+            side_by_side.len(),
+            jobs,
+            || Ok(()),
+            |_, k| {
+                let p = side_by_side[k];
+                exp::train(p.spec, &p.name, &p.variant, &x.runs_dir)
+            },
+            || EvalError::Model("a training thread panicked".into()),
+        )?;
+        trained.extend(todo.iter().map(|p| p.name.clone()));
+    }
     for (i, p) in plan.iter().enumerate() {
         let run = x.runs_dir.join(&p.name);
         if let Some(r) = exp::load_result(&x, &run, &p.spec.obs, &p.label) {
@@ -419,8 +460,10 @@ fn experiment(file: &std::path::Path, tables_only: bool, quiet: bool) -> anyhow:
             bar.inc(1);
             continue;
         }
-        bar.set_message(format!("{}: training", p.name));
-        exp::train(p.spec, &p.name, &p.variant, &x.runs_dir)?;
+        if !trained.contains(&p.name) {
+            bar.set_message(format!("{}: training", p.name));
+            exp::train(p.spec, &p.name, &p.variant, &x.runs_dir)?;
+        }
         let rd = eval::run::open(&run)?;
         let device = eval::run::device(&rd)?;
         let tasks = eval::resolve_tasks(&p.spec.suite, None)?;
