@@ -637,15 +637,19 @@ mod tests {
         }
     }
 
-    #[test]
-    fn experiment_files_parse_plan_and_name_bad_keys() {
+    /// An experiment file `x.toml` with `text` in a fresh folder (kept alive by the returned guard).
+    fn experiment_file(text: &str) -> (tempfile::TempDir, PathBuf) {
         let dir = tempfile::tempdir().unwrap();
         let p = dir.path().join("x.toml");
-        std::fs::write(
-            &p,
+        std::fs::write(&p, text).unwrap();
+        (dir, p)
+    }
+
+    #[test]
+    fn experiment_files_parse_plan_and_name_bad_keys() {
+        let (_dir, p) = experiment_file(
             "name = \"paper\"\nout = \"docs\"\n[[runs]]\nobs = \"state\"\nsuite = \"t1,t3\"\nconfig = \"c.toml\"\nvariants = [\"e_slotssm\", \"slotvla_h1\"]\n[[runs]]\nobs = \"state\"\nsuite = \"libero_mem\"\nconfig = \"c.toml\"\nvariants = [\"e_slotssm\"]\ntag = \"windows\"\nset = [\"train.sampling=windows\"]\n",
-        )
-        .unwrap();
+        );
         let x = Experiment::load(&p).unwrap();
         assert_eq!((x.episodes, x.full_budget, x.workers), (20, true, 1));
         let plan: Vec<(String, String)> = x.plan().into_iter().map(|p| (p.name, p.label)).collect();
@@ -675,13 +679,9 @@ mod tests {
     /// With `--jobs`, the first run of a config whose dataset is missing trains alone, first.
     #[test]
     fn runs_that_generate_their_dataset_train_alone_first() {
-        let dir = tempfile::tempdir().unwrap();
-        let p = dir.path().join("x.toml");
-        std::fs::write(
-            &p,
+        let (dir, p) = experiment_file(
             "name = \"x\"\nout = \"d\"\n[[runs]]\nobs = \"state\"\nsuite = \"t1\"\nconfig = \"a.toml\"\nvariants = [\"e_slotssm\", \"slotvla_h1\", \"dense\"]\n[[runs]]\nobs = \"state\"\nsuite = \"t3\"\nconfig = \"b.toml\"\nvariants = [\"e_slotssm\", \"dense\"]\n",
-        )
-        .unwrap();
+        );
         let x = Experiment::load(&p).unwrap();
         let plan = x.plan();
         let todo: Vec<&Planned> = plan.iter().collect();

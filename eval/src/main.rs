@@ -418,14 +418,19 @@ fn experiment(
             Ok(())
         };
     let started = std::time::Instant::now();
-    // With --jobs N, every run still to train is trained first (N at once), then each is evaluated.
-    let mut trained = std::collections::BTreeSet::new();
-    if jobs > 1 && !tables_only {
+    // The runs evaluated already (read once).
+    let evaluated: Vec<Option<exp::RunResult>> = plan
+        .iter()
+        .map(|p| exp::load_result(&x, &x.runs_dir.join(&p.name), &p.spec.obs, &p.label))
+        .collect();
+    // With --jobs N, every run still to evaluate is trained first (N at once), then evaluated.
+    let pretrained = jobs > 1 && !tables_only;
+    if pretrained {
         let todo: Vec<&exp::Planned> = plan
             .iter()
-            .filter(|p| {
-                exp::load_result(&x, &x.runs_dir.join(&p.name), &p.spec.obs, &p.label).is_none()
-            })
+            .zip(&evaluated)
+            .filter(|(_, r)| r.is_none())
+            .map(|(p, _)| p)
             .collect();
         let (alone, side_by_side) = exp::training_waves(&todo, exp::dataset_ready);
         for p in &alone {
@@ -447,11 +452,10 @@ fn experiment(
             },
             || EvalError::Model("a training thread panicked".into()),
         )?;
-        trained.extend(todo.iter().map(|p| p.name.clone()));
     }
-    for (i, p) in plan.iter().enumerate() {
+    for (i, (p, evaluated)) in plan.iter().zip(evaluated).enumerate() {
         let run = x.runs_dir.join(&p.name);
-        if let Some(r) = exp::load_result(&x, &run, &p.spec.obs, &p.label) {
+        if let Some(r) = evaluated {
             done.push(r);
             bar.inc(1);
             continue;
@@ -460,7 +464,7 @@ fn experiment(
             bar.inc(1);
             continue;
         }
-        if !trained.contains(&p.name) {
+        if !pretrained {
             bar.set_message(format!("{}: training", p.name));
             exp::train(p.spec, &p.name, &p.variant, &x.runs_dir)?;
         }

@@ -80,6 +80,14 @@ fn train_bin(args: &[&str]) -> std::process::Output {
         .unwrap()
 }
 
+/// Runs the `train` binary with `args`, checks that it exits 2 (bad input), returns its stderr.
+fn exit_2_stderr(args: &[&str]) -> String {
+    let out = train_bin(args);
+    let stderr = String::from_utf8_lossy(&out.stderr).into_owned();
+    assert_eq!(out.status.code(), Some(2), "{stderr}");
+    stderr
+}
+
 #[test]
 fn tiny_config_halves_the_training_loss() {
     let _g = serial();
@@ -270,9 +278,7 @@ fn bad_config_key_is_an_error_naming_key_and_file_exit_2() {
         std::fs::write(&p, typo).unwrap();
         let e = train::Config::load(&p).unwrap_err().to_string();
         assert!(e.contains(key) && e.contains("typo.toml"), "{e}");
-        let out = train_bin(&[p.to_str().unwrap()]);
-        let stderr = String::from_utf8_lossy(&out.stderr);
-        assert_eq!(out.status.code(), Some(2), "{stderr}");
+        let stderr = exit_2_stderr(&[p.to_str().unwrap()]);
         assert!(
             stderr.contains(key) && stderr.contains("typo.toml"),
             "{stderr}"
@@ -288,9 +294,7 @@ fn missing_dataset_exits_2_naming_the_directory() {
     let mut cfg = common::tiny_config(&dir.path().join("no_such_dataset"));
     let p = write_config(dir.path(), &cfg);
     let run = dir.path().join("run");
-    let out = train_bin(&[p.to_str().unwrap(), "--run-dir", run.to_str().unwrap()]);
-    let stderr = String::from_utf8_lossy(&out.stderr);
-    assert_eq!(out.status.code(), Some(2), "{stderr}");
+    let stderr = exit_2_stderr(&[p.to_str().unwrap(), "--run-dir", run.to_str().unwrap()]);
     assert!(
         stderr.contains("dataset missing") && stderr.contains("no_such_dataset"),
         "{stderr}"
@@ -298,9 +302,7 @@ fn missing_dataset_exits_2_naming_the_directory() {
     // Generation of a task the simulator does not know is bad input too.
     cfg.data.generate = Some(generate_spec("t99"));
     let p = write_config(dir.path(), &cfg);
-    let out = train_bin(&[p.to_str().unwrap(), "--run-dir", run.to_str().unwrap()]);
-    let stderr = String::from_utf8_lossy(&out.stderr);
-    assert_eq!(out.status.code(), Some(2), "{stderr}");
+    let stderr = exit_2_stderr(&[p.to_str().unwrap(), "--run-dir", run.to_str().unwrap()]);
     assert!(
         stderr.contains("data.generate") && stderr.contains("t99"),
         "{stderr}"
@@ -378,9 +380,7 @@ fn incompatible_checkpoint_exits_2() {
     assert_eq!(e.exit_code(), 2);
     assert!(e.to_string().contains("slotvla_h1"), "{e}");
     let p = write_config(dir.path(), &other);
-    let out = train_bin(&[p.to_str().unwrap(), "--run-dir", run.to_str().unwrap()]);
-    let stderr = String::from_utf8_lossy(&out.stderr);
-    assert_eq!(out.status.code(), Some(2), "{stderr}");
+    let stderr = exit_2_stderr(&[p.to_str().unwrap(), "--run-dir", run.to_str().unwrap()]);
     assert!(stderr.contains("incompatible checkpoint"), "{stderr}");
     // --resume with nothing to resume is bad input too.
     let empty = dir.path().join("empty");
@@ -402,9 +402,7 @@ fn state_mode_on_data_without_poses_and_oracle_without_goal_exit_2() {
     cfg.model.obs = train::config::ObsMode::State;
     let p = write_config(dir.path(), &cfg);
     let run = dir.path().join("run");
-    let out = train_bin(&[p.to_str().unwrap(), "--run-dir", run.to_str().unwrap()]);
-    let stderr = String::from_utf8_lossy(&out.stderr);
-    assert_eq!(out.status.code(), Some(2), "{stderr}");
+    let stderr = exit_2_stderr(&[p.to_str().unwrap(), "--run-dir", run.to_str().unwrap()]);
     assert!(
         stderr.contains("synth_000.mcap") && stderr.contains("object poses"),
         "{stderr}"
@@ -574,23 +572,19 @@ fn backend_not_compiled_in_or_unknown_exits_2() {
         missing.push("wgpu");
     }
     for b in missing {
-        let out = train_bin(&[
+        let stderr = exit_2_stderr(&[
             p.to_str().unwrap(),
             "--run-dir",
             run.to_str().unwrap(),
             "--backend",
             b,
         ]);
-        let stderr = String::from_utf8_lossy(&out.stderr);
-        assert_eq!(out.status.code(), Some(2), "{stderr}");
         assert!(
             stderr.contains(&format!("--features train/{b}")),
             "{stderr}"
         );
     }
-    let out = train_bin(&[p.to_str().unwrap(), "--backend", "cuda"]);
-    let stderr = String::from_utf8_lossy(&out.stderr);
-    assert_eq!(out.status.code(), Some(2), "{stderr}");
+    let stderr = exit_2_stderr(&[p.to_str().unwrap(), "--backend", "cuda"]);
     assert!(stderr.contains("cuda"), "{stderr}");
     assert!(!run.exists(), "nothing written before the backend check");
 }
