@@ -58,3 +58,54 @@ fn generates_resumes_and_repeats_byte_for_byte() {
     let e = generate(&task, a.path(), &GenerateConfig { val: 3, ..cfg }, &|_| {}).unwrap_err();
     assert!(e.to_string().contains("val < episodes"), "{e}");
 }
+
+#[test]
+fn hold_steps_record_the_expert_standing_still_after_the_goal() {
+    let task = registry::resolve("t1").unwrap();
+    let cfg = |hold: Option<usize>| GenerateConfig {
+        episodes: 2,
+        val: 1,
+        seed: 3,
+        workers: 1,
+        image_size: 32,
+        expert: sim::generate::expert_config(false, hold),
+        ..GenerateConfig::default()
+    };
+    let (a, b) = (tempfile::tempdir().unwrap(), tempfile::tempdir().unwrap());
+    generate(&task, a.path(), &cfg(None), &|_| {}).unwrap();
+    generate(&task, b.path(), &cfg(Some(30)), &|_| {}).unwrap();
+    let short = data::EpisodeReader::open(episode_path(a.path(), 0)).unwrap();
+    let long = data::EpisodeReader::open(episode_path(b.path(), 0)).unwrap();
+    let first_done = |r: &data::EpisodeReader| {
+        (0..r.len())
+            .find(|&t| {
+                let p = r.read_step(t).unwrap().progress;
+                p.satisfied == p.total
+            })
+            .expect("the demonstration completes the goal")
+    };
+    let done = first_done(&long);
+    assert_eq!(
+        first_done(&short),
+        done,
+        "same demonstration up to the goal"
+    );
+    // The default stops recording 10 steps after the goal; a 30-step hold is recorded to its
+    // end, after the release and the retreat.
+    assert_eq!(short.len(), done + 11);
+    assert!(long.len() > done + 31, "{} vs {done}", long.len());
+    for t in 0..short.len() - 1 {
+        assert_eq!(
+            short.read_step(t).unwrap().action,
+            long.read_step(t).unwrap().action,
+            "step {t}"
+        );
+    }
+    // The last 30 steps: the arm still, the gripper open, the goal kept.
+    let idle = [0.0, 0.0, 0.0, 0.0, 0.0, 0.0, -1.0];
+    for t in long.len() - 30..long.len() {
+        let s = long.read_step(t).unwrap();
+        assert_eq!(s.action, idle, "step {t}");
+        assert_eq!(s.progress.satisfied, s.progress.total, "step {t}");
+    }
+}

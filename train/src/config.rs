@@ -111,6 +111,10 @@ pub struct GenerateSpec {
     /// action noise, one demonstration per start state.
     #[serde(default, skip_serializing_if = "std::ops::Not::not")]
     pub plain_expert: bool,
+    /// Idle steps the expert records after the goal is done (`sim generate --hold-steps`;
+    /// default 5), so that a policy sees the task end and learns to stop.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub hold_steps: Option<usize>,
 }
 
 fn default_camera() -> usize {

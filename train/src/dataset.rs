@@ -72,11 +72,7 @@ pub fn generate_dataset(spec: &GenerateSpec, dir: &Path, progress: bool) -> Resu
         seed: spec.seed,
         workers,
         image_size: spec.image_size,
-        expert: if spec.plain_expert {
-            sim::generate::plain_expert()
-        } else {
-            sim::expert::ExpertConfig::default()
-        },
+        expert: sim::generate::expert_config(spec.plain_expert, spec.hold_steps),
         ..Default::default()
     };
     let bar = if progress {

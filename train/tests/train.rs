@@ -319,6 +319,7 @@ fn generate_spec(task: &str) -> train::config::GenerateSpec {
         image_size: 32,
         workers: None,
         plain_expert: false,
+        hold_steps: None,
     }
 }
 

@@ -91,6 +91,10 @@ pub enum Command {
         /// pauses) and no action noise, one demonstration per start state (unimodal targets).
         #[arg(long)]
         plain_expert: bool,
+        /// Idle steps (arm still, gripper open) the expert records after the goal is done, so a
+        /// policy learns to stop there (default 5).
+        #[arg(long)]
+        hold_steps: Option<usize>,
     },
     /// Render the agentview of every shipped task at one seed into a labelled contact sheet.
     Sheet {
@@ -270,6 +274,7 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
             workers,
             size,
             plain_expert,
+            hold_steps,
         } => generate::run(
             task,
             out,
@@ -279,11 +284,7 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
                 seed,
                 workers,
                 image_size: size,
-                expert: if plain_expert {
-                    sim::generate::plain_expert()
-                } else {
-                    sim::expert::ExpertConfig::default()
-                },
+                expert: sim::generate::expert_config(plain_expert, hold_steps),
                 ..Default::default()
             },
         ),

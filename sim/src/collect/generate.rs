@@ -16,7 +16,9 @@ use crate::world::env::{Env, EnvConfig};
 
 /// Attempts per episode before giving up.
 pub const MAX_ATTEMPTS: u64 = 8;
-/// Steps recorded after the goal is done (a short hold), when the expert has not stopped by then.
+/// Steps recorded after the goal is done (a short hold), when the expert has not stopped by then;
+/// an expert asked to hold longer than this (`ExpertConfig::hold_steps`) is recorded until it
+/// stops: its release and retreat, then the idle hold.
 pub const HOLD_STEPS: usize = 10;
 
 /// Errors from generation.
@@ -114,6 +116,21 @@ pub fn plain_expert() -> crate::expert::ExpertConfig {
     }
 }
 
+/// The expert `sim generate` and `[data].generate` run: [`plain_expert`] when `plain`, else the
+/// default; `hold_steps` idle steps (arm still, gripper open) after the goal is done, where
+/// `None` keeps the default.
+pub fn expert_config(plain: bool, hold_steps: Option<usize>) -> crate::expert::ExpertConfig {
+    let base = if plain {
+        plain_expert()
+    } else {
+        crate::expert::ExpertConfig::default()
+    };
+    crate::expert::ExpertConfig {
+        hold_steps: hold_steps.unwrap_or(base.hold_steps),
+        ..base
+    }
+}
+
 /// Records one expert episode to `path`; `Ok(false)` (and no file) when the expert fails.
 pub fn record_episode(
     env: &mut Env,
@@ -124,6 +141,7 @@ pub fn record_episode(
     expert: &crate::expert::ExpertConfig,
 ) -> Result<bool, GenerateError> {
     let mut obs = env.reset(seed)?;
+    let expert_hold = expert.hold_steps;
     let mut expert = Expert::with_config(task, seed, expert.clone());
     let mut rec = Recorder::create(path, env, task, seed, writer)?;
     let mut after_done = 0;
@@ -140,7 +158,7 @@ pub fn record_episode(
             .expect("task environments report goal progress");
         if g.done {
             after_done += 1;
-            if after_done > HOLD_STEPS {
+            if after_done > HOLD_STEPS && expert_hold <= HOLD_STEPS {
                 break;
             }
         }
