@@ -364,6 +364,27 @@ fn success_half(t: &TaskSummary) -> f64 {
     (t.success_ci95[1] - t.success_ci95[0]) / 2.0
 }
 
+/// Per variant (in order of first appearance), its rows of `suite` from every run of `runs`; a
+/// task already seen for the variant keeps its first row.
+fn merged_rows<'a>(runs: &[&'a RunResult], suite: &str) -> Vec<(&'a str, Vec<&'a TaskSummary>)> {
+    let mut out: Vec<(&str, Vec<&TaskSummary>)> = Vec::new();
+    for r in runs {
+        for t in r.tasks.iter().filter(|t| report::suite(&t.task) == suite) {
+            let i = match out.iter().position(|(v, _)| *v == r.variant) {
+                Some(i) => i,
+                None => {
+                    out.push((&r.variant, Vec::new()));
+                    out.len() - 1
+                }
+            };
+            if !out[i].1.iter().any(|x| x.task == t.task) {
+                out[i].1.push(t);
+            }
+        }
+    }
+    out
+}
+
 /// The tables: per observation mode, Table 3 (LIBERO-Mem completion) and Table 2 (LIBERO-Goal
 /// success), then other suites' completion and success, and the training cost of each run.
 pub fn markdown(x: &Experiment, runs: &[RunResult], missing: &[(String, String)]) -> String {
@@ -422,16 +443,11 @@ pub fn markdown(x: &Experiment, runs: &[RunResult], missing: &[(String, String)]
                 s.push_str("---:|");
             }
             s.push_str("---:|\n");
-            for r in &of_mode {
-                let rows: Vec<&TaskSummary> = r
-                    .tasks
-                    .iter()
-                    .filter(|t| report::suite(&t.task) == suite)
-                    .collect();
-                if rows.is_empty() {
-                    continue;
-                }
-                s.push_str(&format!("| {} |", r.variant));
+            // One row per variant: runs of the same variant on different tasks (one config per
+            // task) share it; a task evaluated twice for a variant shows the first run's result.
+            let by_variant = merged_rows(&of_mode, &suite);
+            for (variant, rows) in &by_variant {
+                s.push_str(&format!("| {variant} |"));
                 for t in &tasks {
                     match rows.iter().find(|x| &x.task == t) {
                         Some(row) => {
@@ -441,14 +457,45 @@ pub fn markdown(x: &Experiment, runs: &[RunResult], missing: &[(String, String)]
                         None => s.push_str(" – |"),
                     }
                 }
-                let (mv, mh) = suite_mean(&rows, metric);
+                let (mv, mh) = suite_mean(rows, metric);
                 s.push_str(&format!(" **{mv:.1}** ± {mh:.1} |\n"));
             }
             s.push('\n');
+            if suite == "libero_mem" && x.full_budget {
+                // Completion counts subgoals ever reached; success also needs the policy to stop.
+                s.push_str(&format!(
+                    "### {m} mode: {suite} success (%) and over-repetitions\n\nSuccess: every subgoal \
+                     done and nothing repeated; in parentheses, episodes that did the task and then \
+                     went on (upstream `mem_6`).\n\n| variant |"
+                ));
+                for t in &tasks {
+                    s.push_str(&format!(" {} |", report::short(t)));
+                }
+                s.push_str(" mean |\n|---|");
+                for _ in &tasks {
+                    s.push_str("---:|");
+                }
+                s.push_str("---:|\n");
+                for (variant, rows) in &by_variant {
+                    s.push_str(&format!("| {variant} |"));
+                    for t in &tasks {
+                        match rows.iter().find(|x| &x.task == t) {
+                            Some(row) => s.push_str(&format!(
+                                " {:.0} ({}) |",
+                                row.success, row.over_repetition
+                            )),
+                            None => s.push_str(" – |"),
+                        }
+                    }
+                    let (mv, _) = suite_mean(rows, |t| (t.success, success_half(t)));
+                    s.push_str(&format!(" **{mv:.1}** |\n"));
+                }
+                s.push('\n');
+            }
         }
         // Success / completion means of every run of this mode.
         s.push_str(&format!(
-            "### {m} mode: means and training cost\n\n| variant | suite | completion | success | train steps | train time |\n|---|---|---:|---:|---:|---:|\n"
+            "### {m} mode: means and training cost\n\n| variant | tasks | completion | success | train steps | train time |\n|---|---|---:|---:|---:|---:|\n"
         ));
         for r in &of_mode {
             for suite in report::first_seen(r.tasks.iter().map(|t| report::suite(&t.task))) {
@@ -459,8 +506,17 @@ pub fn markdown(x: &Experiment, runs: &[RunResult], missing: &[(String, String)]
                     .collect();
                 let (c, ch) = suite_mean(&rows, |t| (t.completion, t.completion_ci95));
                 let (sc, sh) = suite_mean(&rows, |t| (t.success, success_half(t)));
+                // A few tasks are named; a whole suite by its name.
+                let which = if rows.len() <= 3 {
+                    let mut sorted = rows.clone();
+                    sorted.sort_by_key(|t| task_key(&t.task));
+                    let short: Vec<&str> = sorted.iter().map(|t| report::short(&t.task)).collect();
+                    format!("{suite}: {}", short.join(", "))
+                } else {
+                    format!("{suite} ({} tasks)", rows.len())
+                };
                 s.push_str(&format!(
-                    "| {} | {suite} | {c:.1} ± {ch:.1} | {sc:.1} ± {sh:.1} | {} | {} |\n",
+                    "| {} | {which} | {c:.1} ± {ch:.1} | {sc:.1} ± {sh:.1} | {} | {} |\n",
                     r.variant,
                     r.steps.map_or("–".into(), |v| v.to_string()),
                     r.train_s.map_or("–".into(), |v| if v < 120.0 {
@@ -747,7 +803,7 @@ mod tests {
             names.push(x.name);
         }
         names.sort();
-        assert_eq!(names, ["paper", "t1"]);
+        assert_eq!(names, ["mem", "paper"]);
     }
 
     #[test]
@@ -787,6 +843,21 @@ mod tests {
                 steps: None,
                 tasks: vec![row("libero_mem/t2", 20.0, 10.0)],
             },
+            // The same variant trained for another task (one config per task) joins its row.
+            RunResult {
+                obs: "state".into(),
+                variant: "e_slotssm".into(),
+                run: "runs/c".into(),
+                train_s: Some(60.0),
+                steps: Some(100),
+                tasks: vec![
+                    TaskSummary {
+                        over_repetition: 7,
+                        ..row("libero_mem/t3", 90.0, 55.0)
+                    },
+                    row("libero_mem/t2", 0.0, 0.0),
+                ],
+            },
         ];
         let md = markdown(&x, &runs, &[("pixels".into(), "dense".into())]);
         // Table 3 lists t2 before t10, with the mean of the run's LIBERO-Mem tasks.
@@ -795,12 +866,30 @@ mod tests {
             .lines()
             .find(|l| l.starts_with("| e_slotssm |"))
             .unwrap();
-        assert_eq!(line, "| e_slotssm | 100 ± 5 | 50 ± 5 | **75.0** ± 3.5 |");
+        assert_eq!(
+            line,
+            "| e_slotssm | 100 ± 5 | 90 ± 5 | 50 ± 5 | **80.0** ± 2.9 |"
+        );
+        let table3 = &md[t3..t3 + md[t3..].find("\n#").unwrap()];
+        assert_eq!(
+            table3.matches("| e_slotssm |").count(),
+            1,
+            "one row per variant"
+        );
         let line = md[t3..]
             .lines()
             .find(|l| l.starts_with("| slotvla_h1 |"))
             .unwrap();
-        assert_eq!(line, "| slotvla_h1 | 20 ± 5 | – | **20.0** ± 5.0 |");
+        assert_eq!(line, "| slotvla_h1 | 20 ± 5 | – | – | **20.0** ± 5.0 |");
+        // Success with the over-repetitions beside it.
+        let sr = md
+            .find("libero_mem success (%) and over-repetitions")
+            .unwrap();
+        let line = md[sr..]
+            .lines()
+            .find(|l| l.starts_with("| e_slotssm |"))
+            .unwrap();
+        assert_eq!(line, "| e_slotssm | 100 (0) | 55 (7) | 40 (0) | **65.0** |");
         // Table 2 reports success.
         let t2 = md.find("libero_goal success").unwrap();
         let line = md[t2..]
@@ -809,7 +898,11 @@ mod tests {
             .unwrap();
         assert_eq!(line, "| e_slotssm | 95 ± 10 | **95.0** ± 10.0 |");
         assert!(
-            md.contains("| e_slotssm | libero_mem | 75.0 ± 3.5 | 70.0 ± 7.1 | 3000 | 10.0 min |"),
+            md.contains(
+                "| e_slotssm | libero_mem: t2, t10 | 75.0 ± 3.5 | 70.0 ± 7.1 | 3000 | 10.0 min |"
+            ) && md.contains(
+                "| e_slotssm | libero_mem: t2, t3 | 45.0 ± 3.5 | 27.5 ± 7.1 | 100 | 60 s |"
+            ),
             "{md}"
         );
         assert!(md.contains("- pixels mode: dense"));
@@ -819,13 +912,13 @@ mod tests {
             50.0
         );
         assert_eq!(j["state"]["slotvla_h1"]["libero_mem/t2"]["episodes"], 20);
-        assert_eq!(csv(&runs).lines().count(), 5);
+        assert_eq!(csv(&runs).lines().count(), 7);
         let svg = svg(&runs);
         assert!(svg.starts_with("<svg") && svg.trim_end().ends_with("</svg>"));
         assert_eq!(
             svg.matches("<rect x=").count(),
-            4 + 2,
-            "4 bars + 2 legend boxes"
+            5 + 2,
+            "5 bars (the t2 of the first e_slotssm run) + 2 legend boxes"
         );
     }
 }

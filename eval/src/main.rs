@@ -510,7 +510,12 @@ fn experiment(
         }
         let missing: Vec<(String, String)> = plan[i + 1..]
             .iter()
-            .map(|q| (q.spec.obs.clone(), q.label.clone()))
+            .map(|q| {
+                (
+                    q.spec.obs.clone(),
+                    format!("{} on {}", q.label, q.spec.suite),
+                )
+            })
             .collect();
         write_tables(&done, &missing)?;
         bar.inc(1);
@@ -522,7 +527,12 @@ fn experiment(
             let run = x.runs_dir.join(&p.name).display().to_string();
             !done.iter().any(|d| d.run == run)
         })
-        .map(|p| (p.spec.obs.clone(), p.label.clone()))
+        .map(|p| {
+            (
+                p.spec.obs.clone(),
+                format!("{} on {}", p.label, p.spec.suite),
+            )
+        })
         .collect();
     write_tables(&done, &missing)?;
     print!("{}", exp::markdown(&x, &done, &missing));
