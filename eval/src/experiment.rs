@@ -248,39 +248,51 @@ pub fn train(spec: &RunSpec, name: &str, variant: &str, runs_dir: &Path) -> Resu
     Ok(())
 }
 
-/// Whether the dataset that `spec`'s training config reads is already recorded (`[data].dir` holds an
-/// `index.json`; relative to the working directory, as `train` reads it). False when the config
-/// cannot be read or a `set` override touches `[data]` (the caller then plays safe).
-pub fn dataset_ready(spec: &RunSpec) -> bool {
-    if spec.set.iter().any(|s| s.trim_start().starts_with("data.")) {
-        return false;
+/// The `data.dir=VALUE` override among `spec`'s `set` (the last one wins), as given.
+fn data_dir_override(spec: &RunSpec) -> Option<&str> {
+    spec.set.iter().rev().find_map(|s| {
+        let (k, v) = s.split_once('=')?;
+        (k.trim() == "data.dir").then_some(v.trim())
+    })
+}
+
+/// The dataset folder `spec`'s run trains on: a `data.dir` override (a TOML string, or bare as
+/// `train --set` reads it) or the config's `[data].dir`; `None` when the config cannot be read.
+pub fn dataset_dir(spec: &RunSpec) -> Option<PathBuf> {
+    if let Some(v) = data_dir_override(spec) {
+        let dir = match format!("v = {v}").parse::<toml::Table>() {
+            Ok(t) => t.get("v")?.as_str()?.to_string(),
+            Err(_) => v.to_string(),
+        };
+        return Some(PathBuf::from(dir));
     }
-    let Ok(text) = std::fs::read_to_string(&spec.config) else {
-        return false;
-    };
-    let Ok(value) = text.parse::<toml::Table>() else {
-        return false;
-    };
-    value
-        .get("data")
-        .and_then(|d| d.get("dir"))
-        .and_then(|d| d.as_str())
-        .is_some_and(|dir| Path::new(dir).join("index.json").is_file())
+    let text = std::fs::read_to_string(&spec.config).ok()?;
+    let value = text.parse::<toml::Table>().ok()?;
+    let dir = value.get("data")?.get("dir")?.as_str()?;
+    Some(PathBuf::from(dir))
+}
+
+/// Whether the dataset that `spec`'s run reads ([`dataset_dir`]) is already recorded (it holds an
+/// `index.json`; relative to the working directory, as `train` reads it). False when the config
+/// cannot be read (the caller then plays safe).
+pub fn dataset_ready(spec: &RunSpec) -> bool {
+    dataset_dir(spec).is_some_and(|d| d.join("index.json").is_file())
 }
 
 /// Orders the runs still to train for `--jobs`: first, one at a time, the first run of every
-/// config whose dataset is not recorded yet (its `train` generates it; two at once would both
+/// config (and `data.dir` override) whose dataset is not recorded yet (its `train` generates it; two at once would both
 /// write into the same folder); then the rest, which may train side by side.
 pub fn training_waves<'a, 'b>(
     todo: &[&'b Planned<'a>],
     ready: impl Fn(&RunSpec) -> bool,
 ) -> (Vec<&'b Planned<'a>>, Vec<&'b Planned<'a>>) {
     let (mut alone, mut side_by_side) = (Vec::new(), Vec::new());
-    let mut generating: Vec<&Path> = Vec::new();
+    // One dataset per config and `data.dir` override.
+    let mut generating: Vec<(&Path, Option<&str>)> = Vec::new();
     for &p in todo {
-        let config = p.spec.config.as_path();
-        if !ready(p.spec) && !generating.contains(&config) {
-            generating.push(config);
+        let key = (p.spec.config.as_path(), data_dir_override(p.spec));
+        if !ready(p.spec) && !generating.contains(&key) {
+            generating.push(key);
             alone.push(p);
         } else {
             side_by_side.push(p);
@@ -777,11 +789,45 @@ mod tests {
         assert!(!dataset_ready(&spec));
         std::fs::write(data.join("index.json"), "{}").unwrap();
         assert!(dataset_ready(&spec));
+        // A `data.dir` override is read instead of the config's, quoted or bare; other `data.`
+        // overrides do not matter once the folder holds an index.
         spec.set = vec!["data.dir=\"elsewhere\"".into()];
-        assert!(!dataset_ready(&spec), "a [data] override plays safe");
+        assert!(!dataset_ready(&spec));
+        assert_eq!(dataset_dir(&spec), Some(PathBuf::from("elsewhere")));
+        let other = dir.path().join("other");
+        std::fs::create_dir_all(&other).unwrap();
+        std::fs::write(other.join("index.json"), "{}").unwrap();
+        spec.set = vec![
+            format!("data.dir={:?}", other.display().to_string()),
+            "data.generate.hold_steps=5".into(),
+        ];
+        assert!(dataset_ready(&spec));
+        spec.set = vec![format!("data.dir={}", other.display())];
+        assert!(dataset_ready(&spec));
+        spec.set = vec!["data.generate.hold_steps=5".into()];
+        assert!(dataset_ready(&spec), "the config's folder has an index");
         spec.set.clear();
         spec.config = dir.path().join("missing.toml");
         assert!(!dataset_ready(&spec));
+    }
+
+    /// Two groups of one config on different `data.dir` overrides record two datasets: the first run
+    /// of each trains alone.
+    #[test]
+    fn each_data_dir_override_generates_its_own_dataset() {
+        let (_dir, p) = experiment_file(
+            "name = \"x\"\nout = \"d\"\n[[runs]]\nobs = \"state\"\nsuite = \"t3\"\nconfig = \"a.toml\"\nvariants = [\"e_slotssm\", \"dense\"]\nset = [\"data.dir=\\\"p\\\"\"]\n[[runs]]\nobs = \"state\"\nsuite = \"t3\"\nconfig = \"a.toml\"\nvariants = [\"e_slotssm\", \"dense\"]\ntag = \"q\"\nset = [\"data.dir=\\\"q\\\"\"]\n",
+        );
+        let x = Experiment::load(&p).unwrap();
+        let plan = x.plan();
+        let todo: Vec<&Planned> = plan.iter().collect();
+        let (alone, rest) = training_waves(&todo, |_| false);
+        let names = |v: Vec<&Planned>| v.into_iter().map(|p| p.name.clone()).collect::<Vec<_>>();
+        assert_eq!(
+            names(alone),
+            ["x_state_t3_e_slotssm", "x_state_t3_e_slotssm_q"]
+        );
+        assert_eq!(names(rest), ["x_state_t3_dense", "x_state_t3_dense_q"]);
     }
 
     /// Every shipped experiment file loads, and the training configs it names exist.
