@@ -103,6 +103,17 @@ pub struct Planned<'a> {
     pub label: String,
 }
 
+impl Planned<'_> {
+    /// How the tables list this run while it has no result: its observation mode, and the label
+    /// with the tasks it is for (`e_slotssm+windows on t3`).
+    pub fn not_trained(&self) -> (String, String) {
+        (
+            self.spec.obs.clone(),
+            format!("{} on {}", self.label, self.spec.suite),
+        )
+    }
+}
+
 /// One trained and evaluated policy.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct RunResult {
@@ -397,6 +408,37 @@ fn merged_rows<'a>(runs: &[&'a RunResult], suite: &str) -> Vec<(&'a str, Vec<&'a
     out
 }
 
+/// Appends a Markdown table to `s`: a column per task of `tasks` and a mean column, a row per
+/// variant of `by_variant` (`cell` of its row for each task, `–` where it has none; `mean` of its rows).
+fn variant_table(
+    s: &mut String,
+    tasks: &[String],
+    by_variant: &[(&str, Vec<&TaskSummary>)],
+    cell: impl Fn(&TaskSummary) -> String,
+    mean: impl Fn(&[&TaskSummary]) -> String,
+) {
+    s.push_str("| variant |");
+    for t in tasks {
+        s.push_str(&format!(" {} |", report::short(t)));
+    }
+    s.push_str(" mean |\n|---|");
+    for _ in tasks {
+        s.push_str("---:|");
+    }
+    s.push_str("---:|\n");
+    for (variant, rows) in by_variant {
+        s.push_str(&format!("| {variant} |"));
+        for t in tasks {
+            match rows.iter().find(|x| &x.task == t) {
+                Some(row) => s.push_str(&format!(" {} |", cell(row))),
+                None => s.push_str(" – |"),
+            }
+        }
+        s.push_str(&format!(" {} |\n", mean(rows)));
+    }
+    s.push('\n');
+}
+
 /// The tables: per observation mode, Table 3 (LIBERO-Mem completion) and Table 2 (LIBERO-Goal
 /// success), then other suites' completion and success, and the training cost of each run.
 pub fn markdown(x: &Experiment, runs: &[RunResult], missing: &[(String, String)]) -> String {
@@ -446,63 +488,40 @@ pub fn markdown(x: &Experiment, runs: &[RunResult], missing: &[(String, String)]
                 .collect();
             tasks.sort_by_key(|t| task_key(t));
             tasks.dedup();
-            s.push_str(&format!("## {m} mode: {suite} {title}\n\n| variant |"));
-            for t in &tasks {
-                s.push_str(&format!(" {} |", report::short(t)));
-            }
-            s.push_str(" mean |\n|---|");
-            for _ in &tasks {
-                s.push_str("---:|");
-            }
-            s.push_str("---:|\n");
+            s.push_str(&format!("## {m} mode: {suite} {title}\n\n"));
             // One row per variant: runs of the same variant on different tasks (one config per
             // task) share it; a task evaluated twice for a variant shows the first run's result.
             let by_variant = merged_rows(&of_mode, &suite);
-            for (variant, rows) in &by_variant {
-                s.push_str(&format!("| {variant} |"));
-                for t in &tasks {
-                    match rows.iter().find(|x| &x.task == t) {
-                        Some(row) => {
-                            let (v, h) = metric(row);
-                            s.push_str(&format!(" {v:.0} ± {h:.0} |"));
-                        }
-                        None => s.push_str(" – |"),
-                    }
-                }
-                let (mv, mh) = suite_mean(rows, metric);
-                s.push_str(&format!(" **{mv:.1}** ± {mh:.1} |\n"));
-            }
-            s.push('\n');
+            variant_table(
+                &mut s,
+                &tasks,
+                &by_variant,
+                |row| {
+                    let (v, h) = metric(row);
+                    format!("{v:.0} ± {h:.0}")
+                },
+                |rows| {
+                    let (mv, mh) = suite_mean(rows, metric);
+                    format!("**{mv:.1}** ± {mh:.1}")
+                },
+            );
             if suite == "libero_mem" && x.full_budget {
                 // Completion counts subgoals ever reached; success also needs the policy to stop.
                 s.push_str(&format!(
                     "### {m} mode: {suite} success (%) and over-repetitions\n\nSuccess: every subgoal \
                      done and nothing repeated; in parentheses, episodes that did the task and then \
-                     went on (upstream `mem_6`).\n\n| variant |"
+                     went on (upstream `mem_6`).\n\n"
                 ));
-                for t in &tasks {
-                    s.push_str(&format!(" {} |", report::short(t)));
-                }
-                s.push_str(" mean |\n|---|");
-                for _ in &tasks {
-                    s.push_str("---:|");
-                }
-                s.push_str("---:|\n");
-                for (variant, rows) in &by_variant {
-                    s.push_str(&format!("| {variant} |"));
-                    for t in &tasks {
-                        match rows.iter().find(|x| &x.task == t) {
-                            Some(row) => s.push_str(&format!(
-                                " {:.0} ({}) |",
-                                row.success, row.over_repetition
-                            )),
-                            None => s.push_str(" – |"),
-                        }
-                    }
-                    let (mv, _) = suite_mean(rows, |t| (t.success, success_half(t)));
-                    s.push_str(&format!(" **{mv:.1}** |\n"));
-                }
-                s.push('\n');
+                variant_table(
+                    &mut s,
+                    &tasks,
+                    &by_variant,
+                    |row| format!("{:.0} ({})", row.success, row.over_repetition),
+                    |rows| {
+                        let (mv, _) = suite_mean(rows, |t| (t.success, success_half(t)));
+                        format!("**{mv:.1}**")
+                    },
+                );
             }
         }
         // Success / completion means of every run of this mode.

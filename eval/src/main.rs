@@ -508,15 +508,8 @@ fn experiment(
         if let Some(r) = exp::load_result(&x, &run, &p.spec.obs, &p.label) {
             done.push(r);
         }
-        let missing: Vec<(String, String)> = plan[i + 1..]
-            .iter()
-            .map(|q| {
-                (
-                    q.spec.obs.clone(),
-                    format!("{} on {}", q.label, q.spec.suite),
-                )
-            })
-            .collect();
+        let missing: Vec<(String, String)> =
+            plan[i + 1..].iter().map(|q| q.not_trained()).collect();
         write_tables(&done, &missing)?;
         bar.inc(1);
     }
@@ -527,12 +520,7 @@ fn experiment(
             let run = x.runs_dir.join(&p.name).display().to_string();
             !done.iter().any(|d| d.run == run)
         })
-        .map(|p| {
-            (
-                p.spec.obs.clone(),
-                format!("{} on {}", p.label, p.spec.suite),
-            )
-        })
+        .map(|p| p.not_trained())
         .collect();
     write_tables(&done, &missing)?;
     print!("{}", exp::markdown(&x, &done, &missing));

@@ -111,8 +111,8 @@ pub struct GenerateSpec {
     /// action noise, one demonstration per start state.
     #[serde(default, skip_serializing_if = "std::ops::Not::not")]
     pub plain_expert: bool,
-    /// Idle steps the expert records after the goal is done (`sim generate --hold-steps`;
-    /// default 5), so that a policy sees the task end and learns to stop.
+    /// Idle steps recorded after the expert's release and retreat once the goal is done
+    /// (`sim generate --hold-steps`; by default the recording ends 10 steps after the goal).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub hold_steps: Option<usize>,
 }

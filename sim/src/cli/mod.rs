@@ -91,8 +91,8 @@ pub enum Command {
         /// pauses) and no action noise, one demonstration per start state (unimodal targets).
         #[arg(long)]
         plain_expert: bool,
-        /// Idle steps (arm still, gripper open) the expert records after the goal is done, so a
-        /// policy learns to stop there (default 5).
+        /// Idle steps (arm still, gripper open) recorded after the expert's release and retreat
+        /// once the goal is done (by default the recording ends 10 steps after the goal).
         #[arg(long)]
         hold_steps: Option<usize>,
     },
