@@ -523,6 +523,9 @@ pub fn markdown(x: &Experiment, runs: &[RunResult], missing: &[(String, String)]
                     },
                 );
             }
+            if suite == "libero_mem" {
+                s.push_str(&memory_claim(m, &by_variant));
+            }
         }
         // Success / completion means of every run of this mode.
         s.push_str(&format!(
@@ -567,6 +570,124 @@ pub fn markdown(x: &Experiment, runs: &[RunResult], missing: &[(String, String)]
         }
         s.push('\n');
     }
+    s
+}
+
+/// The counting tasks of the memory claim (LIBERO-Mem "… N times").
+pub const COUNTING_TASKS: [&str; 4] = [
+    "libero_mem/t3",
+    "libero_mem/t4",
+    "libero_mem/t5",
+    "libero_mem/t6",
+];
+
+/// Subgoal-completion margin (points) that e_slotssm must have over slotvla_h1 on every counting
+/// task for the memory claim to hold.
+pub const CLAIM_MARGIN: f64 = 30.0;
+
+/// The memory claim section of one mode (empty when no counting task has both sides): on each
+/// counting task, subgoal completion (success in parentheses) of e_slotssm minus slotvla_h1 (equal
+/// inputs, no oracle label), of e_slotssm minus e_slotssm trained on independent windows, and of
+/// e_slotssm_oracle minus e_slotssm; and whether the claim (≥ [`CLAIM_MARGIN`] points on every
+/// counting task measured) holds.
+fn memory_claim(mode: &str, by_variant: &[(&str, Vec<&TaskSummary>)]) -> String {
+    let find = |variant: &str, task: &str| -> Option<&TaskSummary> {
+        by_variant
+            .iter()
+            .find(|(v, _)| *v == variant)
+            .and_then(|(_, rows)| rows.iter().find(|t| t.task == task).copied())
+    };
+    let measured: Vec<&str> = COUNTING_TASKS
+        .into_iter()
+        .filter(|t| find("e_slotssm", t).is_some() && find("slotvla_h1", t).is_some())
+        .collect();
+    if measured.is_empty() {
+        return String::new();
+    }
+    let comparisons = [
+        (
+            "e_slotssm − slotvla_h1 (the claim)",
+            "e_slotssm",
+            "slotvla_h1",
+        ),
+        (
+            "e_slotssm − e_slotssm+windows (carried memory vs independent windows)",
+            "e_slotssm",
+            "e_slotssm+windows",
+        ),
+        (
+            "e_slotssm_oracle − e_slotssm (what the oracle label adds)",
+            "e_slotssm_oracle",
+            "e_slotssm",
+        ),
+    ];
+    let mut s = format!(
+        "### {mode} mode: the memory claim on the counting tasks\n\nPoints of subgoal completion \
+         (success in parentheses) between two variants on each counting task; the claim: e_slotssm \
+         ≥ {CLAIM_MARGIN:.0} points above the memoryless slotvla_h1 with equal inputs (no oracle \
+         label) on every counting task.\n\n| comparison |"
+    );
+    for t in &measured {
+        s.push_str(&format!(" {} |", report::short(t)));
+    }
+    s.push_str(" mean |\n|---|");
+    for _ in &measured {
+        s.push_str("---:|");
+    }
+    s.push_str("---:|\n");
+    for (label, a, b) in comparisons {
+        let cells: Vec<Option<(f64, f64)>> = measured
+            .iter()
+            .map(|t| {
+                let (x, y) = (find(a, t)?, find(b, t)?);
+                Some((x.completion - y.completion, x.success - y.success))
+            })
+            .collect();
+        if cells.iter().all(Option::is_none) {
+            continue;
+        }
+        s.push_str(&format!("| {label} |"));
+        for c in &cells {
+            match c {
+                Some((dc, ds)) => s.push_str(&format!(" {dc:+.0} ({ds:+.0}) |")),
+                None => s.push_str(" – |"),
+            }
+        }
+        let have: Vec<(f64, f64)> = cells.iter().flatten().copied().collect();
+        let n = have.len() as f64;
+        let (mc, ms) = have
+            .iter()
+            .fold((0.0, 0.0), |(c, s), (dc, ds)| (c + dc / n, s + ds / n));
+        s.push_str(&format!(" **{mc:+.1}** ({ms:+.1}) |\n"));
+    }
+    let margins: Vec<f64> = measured
+        .iter()
+        .filter_map(|t| Some(find("e_slotssm", t)?.completion - find("slotvla_h1", t)?.completion))
+        .collect();
+    let holds = margins.iter().all(|m| *m >= CLAIM_MARGIN);
+    let missing: Vec<&str> = COUNTING_TASKS
+        .into_iter()
+        .filter(|t| !measured.contains(t))
+        .map(report::short)
+        .collect();
+    s.push_str(&format!(
+        "\nThe claim {} on {} ({}).",
+        if holds { "holds" } else { "does not hold" },
+        measured
+            .iter()
+            .map(|t| report::short(t))
+            .collect::<Vec<_>>()
+            .join(", "),
+        if holds {
+            format!("every margin ≥ {CLAIM_MARGIN:.0} points")
+        } else {
+            format!("a margin below {CLAIM_MARGIN:.0} points")
+        }
+    ));
+    if !missing.is_empty() {
+        s.push_str(&format!(" Not measured on {}.", missing.join(", ")));
+    }
+    s.push_str("\n\n");
     s
 }
 
@@ -722,6 +843,80 @@ mod tests {
             mean_steps: 100.0,
             over_repetition: 0,
         }
+    }
+
+    fn state_run(variant: &str, tasks: Vec<TaskSummary>) -> RunResult {
+        RunResult {
+            obs: "state".into(),
+            variant: variant.into(),
+            run: format!("runs/{variant}"),
+            train_s: None,
+            steps: None,
+            tasks,
+        }
+    }
+
+    /// The memory-claim section: margins per counting task and their mean, the verdict, the
+    /// counting tasks not measured; no section without both sides of the claim.
+    #[test]
+    fn memory_claim_gives_margins_and_a_verdict() {
+        let x = Experiment {
+            name: "p".into(),
+            out: "d".into(),
+            episodes: 20,
+            seed: 1000,
+            full_budget: true,
+            workers: 1,
+            runs_dir: "runs".into(),
+            runs: vec![],
+        };
+        let t3 = "libero_mem/t3";
+        let t5 = "libero_mem/t5";
+        let mut runs = vec![
+            state_run("e_slotssm_oracle", vec![row(t3, 60.0, 55.0)]),
+            state_run("e_slotssm", vec![row(t3, 40.0, 5.0), row(t5, 50.0, 10.0)]),
+            state_run("slotvla_h1", vec![row(t3, 5.0, 0.0), row(t5, 10.0, 0.0)]),
+            state_run("e_slotssm+windows", vec![row(t5, 20.0, 0.0)]),
+            state_run("e_slotssm", vec![row("libero_mem/t1", 90.0, 30.0)]),
+        ];
+        let md = markdown(&x, &runs, &[]);
+        let sec = md
+            .split("### state mode: the memory claim on the counting tasks")
+            .nth(1)
+            .expect("a memory-claim section");
+        assert!(sec.contains("| comparison | t3 | t5 | mean |"), "{sec}");
+        assert!(
+            sec.contains(
+                "| e_slotssm − slotvla_h1 (the claim) | +35 (+5) | +40 (+10) | **+37.5** (+7.5) |"
+            ),
+            "{sec}"
+        );
+        assert!(
+            sec.contains(
+                "(carried memory vs independent windows) | – | +30 (+10) | **+30.0** (+10.0) |"
+            ),
+            "{sec}"
+        );
+        assert!(
+            sec.contains("(what the oracle label adds) | +20 (+50) | – | **+20.0** (+50.0) |"),
+            "{sec}"
+        );
+        assert!(
+            sec.contains(
+                "The claim holds on t3, t5 (every margin ≥ 30 points). Not measured on t4, t6."
+            ),
+            "{sec}"
+        );
+        // A margin under 30 points on one task: the claim does not hold.
+        runs[2].tasks[1].completion = 25.0;
+        let md = markdown(&x, &runs, &[]);
+        assert!(
+            md.contains("The claim does not hold on t3, t5 (a margin below 30 points)."),
+            "{md}"
+        );
+        // Without slotvla_h1 there is no claim to measure.
+        runs.remove(2);
+        assert!(!markdown(&x, &runs, &[]).contains("memory claim"));
     }
 
     /// An experiment file `x.toml` with `text` in a fresh folder (kept alive by the returned guard).
