@@ -3,7 +3,9 @@
 //! malformed: the message names the file and the place), 1 for anything else. The error is
 //! printed once on stderr as `error: <context>: <cause>`.
 
+use std::io::Write;
 use std::process::ExitCode;
+use std::sync::atomic::{AtomicBool, Ordering};
 
 /// Exit status of bad input.
 pub const BAD_INPUT: u8 = 2;
@@ -50,10 +52,65 @@ pub fn is_bad_input<E: BadInput + std::error::Error + 'static>(err: &anyhow::Err
     })
 }
 
+/// The one-line message of `err`: its chain of causes joined by `: `, each cause left out when the
+/// text before it already ends with it (error types that print their source themselves would
+/// otherwise say "No such file or directory (os error 2)" twice).
+pub fn message(err: &anyhow::Error) -> String {
+    let mut msg = String::new();
+    for cause in err.chain() {
+        let text = cause.to_string();
+        if msg.is_empty() {
+            msg = text;
+        } else if !msg.ends_with(&text) {
+            msg.push_str(": ");
+            msg.push_str(&text);
+        }
+    }
+    msg
+}
+
 /// Prints `err` once and returns the process exit code of the contract.
 pub fn report<E: BadInput + std::error::Error + 'static>(err: &anyhow::Error) -> ExitCode {
-    eprintln!("error: {err:#}");
+    eprintln!("error: {}", message(err));
     ExitCode::from(status(is_bad_input::<E>(err)))
+}
+
+/// Set once stdout's reader has gone away (`… | head`): later output is dropped.
+static STDOUT_CLOSED: AtomicBool = AtomicBool::new(false);
+
+/// Writes to stdout and flushes, as `print!` does, except that a closed pipe is not an error: the
+/// output is dropped from then on and the program goes on (and writes its files) to a normal exit.
+/// Other write errors are reported once on stderr. Used through [`out!`](crate::out) and
+/// [`outln!`](crate::outln).
+pub fn write_stdout(args: std::fmt::Arguments) {
+    if STDOUT_CLOSED.load(Ordering::Relaxed) {
+        return;
+    }
+    let mut out = std::io::stdout().lock();
+    if let Err(e) = out.write_fmt(args).and_then(|()| out.flush()) {
+        STDOUT_CLOSED.store(true, Ordering::Relaxed);
+        if e.kind() != std::io::ErrorKind::BrokenPipe {
+            eprintln!("error: writing to stdout: {e} (further output dropped)");
+        }
+    }
+}
+
+/// Whether stdout was found closed by an earlier write.
+pub fn stdout_closed() -> bool {
+    STDOUT_CLOSED.load(Ordering::Relaxed)
+}
+
+/// `print!` that ends quietly on a closed pipe ([`write_stdout`]).
+#[macro_export]
+macro_rules! out {
+    ($($arg:tt)*) => { $crate::exit::write_stdout(format_args!($($arg)*)) };
+}
+
+/// `println!` that ends quietly on a closed pipe ([`write_stdout`]).
+#[macro_export]
+macro_rules! outln {
+    () => { $crate::exit::write_stdout(format_args!("\n")) };
+    ($($arg:tt)*) => { $crate::exit::write_stdout(format_args!("{}\n", format_args!($($arg)*))) };
 }
 
 #[cfg(test)]
@@ -73,5 +130,20 @@ mod tests {
         assert!(!is_bad_input::<DataError>(&anyhow::Error::new(io)));
         assert!(!is_bad_input::<DataError>(&anyhow::anyhow!("plain")));
         assert_eq!((status(true), status(false)), (2, 1));
+    }
+
+    #[test]
+    fn message_says_each_cause_once() {
+        let io = DataError::Io {
+            path: "runs/x/state.json".into(),
+            source: std::io::Error::from(std::io::ErrorKind::NotFound),
+        };
+        let e = anyhow::Error::new(io).context("loading the checkpoint");
+        assert_eq!(
+            message(&e),
+            "loading the checkpoint: runs/x/state.json: entity not found"
+        );
+        let plain = anyhow::anyhow!("disk full").context("writing out.json");
+        assert_eq!(message(&plain), "writing out.json: disk full");
     }
 }

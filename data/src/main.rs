@@ -118,7 +118,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
         } => {
             let idx = data::build_index(&dir, &IndexOptions { val_fraction, seed })?;
             let train = idx.split(data::Split::Train).len();
-            println!(
+            data::outln!(
                 "{}: {} episodes ({} train, {} val), {} train steps, vocabulary {} words",
                 dir.join(data::index::INDEX_FILE).display(),
                 idx.episodes.len(),
@@ -129,7 +129,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             );
             let a = &idx.stats.action;
             for d in 0..7 {
-                println!(
+                data::outln!(
                     "  action[{d}] mean {:+.4} std {:.4} q01 {:+.4} q99 {:+.4} {}",
                     a.mean[d],
                     a.std[d],
@@ -145,41 +145,45 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                 r.verify()?;
             }
             let m = r.meta();
-            println!("{}", file.display());
-            println!(
+            data::outln!("{}", file.display());
+            data::outln!(
                 "  size        {} bytes, {} chunks{}",
                 r.file_size(),
                 r.chunk_count(),
                 if verify { ", verified" } else { "" }
             );
-            println!(
+            data::outln!(
                 "  steps       {} ({:.2} s at {} Hz)",
                 r.len(),
                 r.duration_s(),
                 m.fps
             );
-            println!("  task        {}", m.task_id);
-            println!("  instruction {}", m.instruction);
-            println!("  seed        {}", m.seed);
-            println!(
+            data::outln!("  task        {}", m.task_id);
+            data::outln!("  instruction {}", m.instruction);
+            data::outln!("  seed        {}", m.seed);
+            data::outln!(
                 "  simulator   {} / assets {}",
-                m.sim_version, m.asset_version
+                m.sim_version,
+                m.asset_version
             );
-            println!("  orientation {}", m.image_orientation);
-            println!("  bddl        {} bytes", m.bddl.len());
+            data::outln!("  orientation {}", m.image_orientation);
+            data::outln!("  bddl        {} bytes", m.bddl.len());
             for (k, v) in &m.extra {
-                println!("  extra.{k} = {v}");
+                data::outln!("  extra.{k} = {v}");
             }
-            println!("  channels:");
+            data::outln!("  channels:");
             for c in r.channels() {
-                println!(
+                data::outln!(
                     "    {:<26} {:<26} {:<9} {:>6} msgs",
-                    c.topic, c.schema, c.encoding, c.count
+                    c.topic,
+                    c.schema,
+                    c.encoding,
+                    c.count
                 );
             }
             if !r.is_empty() {
                 let s = r.read_step(0)?;
-                println!(
+                data::outln!(
                     "  agentview {}x{}, eye-in-hand {}x{}, {} objects at step 0",
                     s.agentview.width,
                     s.agentview.height,
@@ -229,7 +233,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                 progress: true,
             };
             let rep = data::rlds::convert_rlds(&src, &out, &opts)?;
-            println!(
+            data::outln!(
                 "{}: {} shards → {} episodes, {} steps in {} (images: {} applied)",
                 rep.name,
                 rep.shards,
@@ -246,7 +250,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             size,
         } => {
             let paths = data::synth::write_synthetic_dataset(&out, episodes, steps, size)?;
-            println!(
+            data::outln!(
                 "wrote {} episodes of {steps} steps to {}",
                 paths.len(),
                 out.display()
@@ -267,14 +271,22 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                     tmp.path().to_path_buf()
                 }
             };
-            println!(
+            data::outln!(
                 "{:>6} {:>6} {:>8} {:>9} {:>12}",
-                "T", "size", "workers", "windows", "windows/s"
+                "T",
+                "size",
+                "workers",
+                "windows",
+                "windows/s"
             );
             for r in data::bench::bench_windows(&dir, window, &sizes, &workers, windows)? {
-                println!(
+                data::outln!(
                     "{:>6} {:>6} {:>8} {:>9} {:>12.1}",
-                    r.window, r.image_size, r.workers, r.windows, r.windows_per_s
+                    r.window,
+                    r.image_size,
+                    r.workers,
+                    r.windows,
+                    r.windows_per_s
                 );
             }
         }

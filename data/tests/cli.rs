@@ -63,6 +63,17 @@ fn synth_stats_inspect_and_bad_input_exit_codes() {
         "{err}"
     );
     assert_eq!(err.lines().count(), 1, "{err}");
+    // stdout closed (`data inspect … | true`): quiet, exit 0
+    let (reader, writer) = std::io::pipe().unwrap();
+    drop(reader);
+    let out = data()
+        .arg("inspect")
+        .arg(&ep)
+        .stdout(writer)
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!((out.status.code(), err.as_ref()), (Some(0), ""));
     // missing file: exit 2 too
     let out = data()
         .arg("inspect")

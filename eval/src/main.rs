@@ -309,7 +309,7 @@ fn evaluate(args: &EvalArgs) -> anyhow::Result<()> {
     let viz = args.viz.then(|| s.out.join("viz"));
     let results = run_tasks(args, &s, &tasks, viz.clone())?;
     let md = format!("{}{}", header(&s, args), report::markdown(&results.tasks));
-    print!("{md}");
+    data::out!("{md}");
     eval::write_atomic(&s.out.join("results.md"), md.as_bytes())?;
     eval::write_atomic(
         &s.out.join("results.json"),
@@ -349,7 +349,7 @@ fn scaling(args: &EvalArgs, repeats: &[usize]) -> anyhow::Result<()> {
         }
     }
     let md = format!("{}{}", header(&s, args), report::scaling_table(&rows));
-    print!("{md}");
+    data::out!("{md}");
     eval::write_atomic(&s.out.join("scaling.md"), md.as_bytes())?;
     eval::write_atomic(
         &s.out.join("scaling.json"),
@@ -375,7 +375,7 @@ fn compare(paths: &[PathBuf], out: Option<PathBuf>) -> anyhow::Result<()> {
         runs.push((name, r));
     }
     let md = report::compare(&runs);
-    print!("{md}");
+    data::out!("{md}");
     if let Some(o) = out {
         eval::write_atomic(&o, md.as_bytes())
             .with_context(|| format!("writing {}", o.display()))?;
@@ -523,7 +523,7 @@ fn experiment(
         .map(|p| p.not_trained())
         .collect();
     write_tables(&done, &missing)?;
-    print!("{}", exp::markdown(&x, &done, &missing));
+    data::out!("{}", exp::markdown(&x, &done, &missing));
     eprintln!(
         "wrote {}/results.{{md,json,csv,svg}} ({} of {} runs) in {:.1} min",
         x.out.display(),

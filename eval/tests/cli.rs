@@ -232,3 +232,30 @@ fn expert_from_libero_init_states() {
         "{out}"
     );
 }
+
+#[test]
+fn a_closed_stdout_still_writes_the_results() {
+    let dir = tempfile::tempdir().unwrap();
+    let (reader, writer) = std::io::pipe().unwrap();
+    drop(reader);
+    let out = Command::new(env!("CARGO_BIN_EXE_eval"))
+        .args([
+            "--tasks",
+            "t1",
+            "--episodes",
+            "1",
+            "--policy",
+            "zero",
+            "--out",
+        ])
+        .arg(dir.path())
+        .stdout(writer)
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(0), "{err}");
+    assert!(!err.contains("panicked"), "{err}");
+    for f in ["results.md", "results.json", "results.csv"] {
+        assert!(dir.path().join(f).is_file(), "{f} missing");
+    }
+}

@@ -279,6 +279,13 @@ pub struct LossConfig {
     pub sa_hidden: usize,
 }
 
+/// Largest image side accepted (the full preset is 224; LIBERO renders at most 512).
+pub const MAX_IMAGE_SIDE: usize = 1024;
+/// Largest feature width accepted (channels, slot and decoder widths; the full preset's is 512).
+pub const MAX_WIDTH: usize = 8192;
+/// Largest frame count accepted for windows, histories and action horizons.
+pub const MAX_FRAMES: usize = 1024;
+
 /// The whole model.
 #[derive(Serialize, Deserialize, Clone, Debug, PartialEq)]
 #[serde(deny_unknown_fields)]
@@ -438,6 +445,17 @@ impl ModelConfig {
         self
     }
 
+    /// The loss weights by name, for checks and reports.
+    fn loss_weights(&self) -> [(&'static str, f64); 4] {
+        let l = &self.loss;
+        [
+            ("action", l.action),
+            ("contrastive", l.contrastive),
+            ("window", l.window),
+            ("slot_recon", l.slot_recon),
+        ]
+    }
+
     /// Feature grid [gh, gw] of the encoder for `image_size` (M = gh · gw).
     pub fn grid(&self) -> [usize; 2] {
         let mut g = self.image_size;
@@ -497,6 +515,48 @@ impl ModelConfig {
     /// Checks the config for consistency.
     pub fn validate(&self) -> Result<()> {
         let err = |m: String| Err(ModelError::Config(m));
+        // Sizes are bounded first, so that nothing below (or the allocation of the weights) meets
+        // a zero image or a multi-gigabyte tensor.
+        let c = &self.encoder.channels;
+        for (key, value, max) in [
+            ("image_size[0]", self.image_size[0], MAX_IMAGE_SIDE),
+            ("image_size[1]", self.image_size[1], MAX_IMAGE_SIDE),
+            (
+                "encoder.channels",
+                c.iter().copied().max().unwrap_or(1),
+                MAX_WIDTH,
+            ),
+            ("encoder.feature_dim", self.encoder.feature_dim, MAX_WIDTH),
+            ("slots.num_slots", self.slots.num_slots, 256),
+            ("slots.dim", self.slots.dim, MAX_WIDTH),
+            ("slots.iters_first", self.slots.iters_first, 64),
+            ("ssm.blocks", self.ssm.blocks, 64),
+            ("ssm.inner", self.ssm.inner, 4 * MAX_WIDTH),
+            ("ssm.state", self.ssm.state, 1024),
+            ("window.past", self.window.past, MAX_FRAMES),
+            ("window.future", self.window.future, MAX_FRAMES),
+            ("relation.tokens", self.relation.tokens, 256),
+            ("relation.layers", self.relation.layers, 64),
+            ("decoder.width", self.decoder.width, MAX_WIDTH),
+            ("decoder.layers", self.decoder.layers, 64),
+            ("decoder.horizon", self.decoder.horizon, MAX_FRAMES),
+            ("text.max_len", self.text.max_len, 4096),
+            ("history", self.variant.history(), MAX_FRAMES),
+        ] {
+            if value > max {
+                return err(format!("{key} = {value} is above the limit {max}"));
+            }
+        }
+        if self.image_size.iter().any(|&s| s < 8) {
+            return err(format!(
+                "image_size {:?}: each side must be ≥ 8 pixels",
+                self.image_size
+            ));
+        }
+        let weights = self.loss_weights();
+        if let Some((key, v)) = weights.iter().find(|(_, v)| !(*v >= 0.0 && v.is_finite())) {
+            return err(format!("loss.{key} = {v}: must be a finite number ≥ 0"));
+        }
         if self.encoder.channels.is_empty()
             || self.encoder.channels.len() != self.encoder.strides.len()
         {
@@ -545,8 +605,8 @@ impl ModelConfig {
         if self.text.max_len == 0 {
             return err("text.max_len must be ≥ 1".into());
         }
-        if self.loss.tau <= 0.0 {
-            return err("loss.tau must be > 0".into());
+        if !(self.loss.tau > 0.0 && self.loss.tau.is_finite()) {
+            return err("loss.tau must be a finite number > 0".into());
         }
         if let Observation::State { tokens, categories } = self.observation {
             if tokens < 2 || categories < 3 {
@@ -644,5 +704,49 @@ mod tests {
         assert!(cfg.validate().is_err());
         cfg.decoder.heads = 3; // 128 is not a multiple of 3
         assert!(cfg.validate().is_err());
+    }
+
+    #[test]
+    fn validate_bounds_sizes_and_refuses_non_finite_numbers() {
+        let msg = |f: &dyn Fn(&mut ModelConfig)| {
+            let mut cfg = ModelConfig::tiny(Variant::ESlotSsm {
+                oracle_subgoal: false,
+            });
+            f(&mut cfg);
+            cfg.validate().unwrap_err().to_string()
+        };
+        assert!(
+            msg(&|c| c.image_size = [0, 0]).contains("image_size [0, 0]: each side must be ≥ 8")
+        );
+        assert!(
+            msg(&|c| c.image_size = [100_000, 100_000])
+                .contains("image_size[0] = 100000 is above the limit 1024")
+        );
+        assert!(
+            msg(&|c| c.window.past = 100_000)
+                .contains("window.past = 100000 is above the limit 1024")
+        );
+        assert!(
+            msg(&|c| c.slots.dim = 1 << 20).contains("slots.dim = 1048576 is above the limit 8192")
+        );
+        assert!(
+            msg(&|c| c.loss.window = f64::NAN)
+                .contains("loss.window = NaN: must be a finite number ≥ 0")
+        );
+        assert!(msg(&|c| c.loss.action = -1.0).contains("loss.action = -1"));
+        assert!(
+            msg(&|c| c.loss.tau = f64::INFINITY).contains("loss.tau must be a finite number > 0")
+        );
+        // The presets are inside every bound.
+        for v in [
+            Variant::ESlotSsm {
+                oracle_subgoal: true,
+            },
+            Variant::SlotVla { history: 8 },
+            Variant::Dense { history: 1 },
+        ] {
+            ModelConfig::tiny(v).validate().unwrap();
+            ModelConfig::full(v).validate().unwrap();
+        }
     }
 }

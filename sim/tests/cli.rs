@@ -251,3 +251,58 @@ fn bddl_syntax_error_names_file_line_and_column() {
     assert!(err.contains("broken.bddl:"), "{err}");
     assert!(err.contains(":1:1") || err.contains(":3:"), "{err}");
 }
+
+/// Runs `sim ARGS` with stdout a pipe whose reader is already gone (`sim … | true`).
+fn sim_into_closed_pipe(args: &[&str]) -> (i32, String) {
+    let (reader, writer) = std::io::pipe().unwrap();
+    drop(reader);
+    let out = Command::new(env!("CARGO_BIN_EXE_sim"))
+        .args(args)
+        .stdout(writer)
+        .output()
+        .unwrap();
+    (
+        out.status.code().unwrap_or(-1),
+        String::from_utf8_lossy(&out.stderr).into_owned(),
+    )
+}
+
+#[test]
+fn a_closed_stdout_ends_quietly() {
+    for args in [&["tasks"][..], &["info"]] {
+        let (code, err) = sim_into_closed_pipe(args);
+        assert_eq!((code, err.as_str()), (0, ""), "sim {args:?}");
+    }
+}
+
+#[test]
+fn a_goal_nested_10000_deep_is_exit_2_not_a_stack_overflow() {
+    let path = tmp("deep.bddl");
+    let text = std::fs::read_to_string(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/tasks/libero_mem/t1.bddl"
+    ))
+    .unwrap();
+    let start = text.find("(:goal").unwrap();
+    let deep = format!(
+        "{}(:goal {}(On akita_black_bowl_1 plate_1){}))\n",
+        &text[..start],
+        "(And ".repeat(10_000),
+        ")".repeat(10_000)
+    );
+    std::fs::write(&path, deep).unwrap();
+    let (code, _, err) = sim(&[
+        "render",
+        "--task",
+        path.to_str().unwrap(),
+        "--out",
+        tmp("deep.png").to_str().unwrap(),
+    ]);
+    assert_eq!(code, 2, "{err}");
+    assert!(
+        err.starts_with("error: ") && err.contains("deep.bddl:"),
+        "{err}"
+    );
+    assert!(err.contains("nested deeper than 64 levels"), "{err}");
+    assert!(!tmp("deep.png").exists());
+}

@@ -323,6 +323,31 @@ fn error_unbalanced_parentheses() {
 }
 
 #[test]
+fn error_nesting_too_deep_is_an_error_not_a_stack_overflow() {
+    // A goal nested 10 000 deep: refused at the first `(` past the limit, which is on line 2.
+    let deep = format!(
+        "{HEAD}  (:objects a - plate)\n(:goal {}(On a a){}))",
+        "(And ".repeat(10_000),
+        ")".repeat(10_000)
+    );
+    let (l, c, m) = at(&deep);
+    let limit = bddl::MAX_DEPTH;
+    // `(define` is level 1 and `(:goal` level 2, so the goal's `(And` number limit - 1 is refused.
+    assert_eq!((l, c), (3, 8 + 5 * (limit as u32 - 2)));
+    assert_eq!(m, format!("parentheses nested deeper than {limit} levels"));
+    // 100 000 balanced pairs, nothing else: the same error, at the first `(` too deep.
+    let parens = format!("{}{}", "(".repeat(100_000), ")".repeat(100_000));
+    assert_eq!(at(&parens), (1, limit as u32 + 1, m));
+    // LIBERO's depth is far below the limit: a goal nested 40 deep still parses.
+    let ok = format!(
+        "{HEAD}  (:objects a - plate)\n(:goal {}(On a a){}))",
+        "(And ".repeat(40),
+        ")".repeat(40)
+    );
+    bddl::parse(&ok).expect("40 levels parse");
+}
+
+#[test]
 fn error_missing_target() {
     let text = format!(
         "{HEAD}  (:regions\n    (plate_region\n      (:ranges ((0 0 1 1))))\n  )\n  (:goal (True)))"
@@ -605,4 +630,63 @@ proptest! {
         let back = bddl::parse(&text).map_err(|e| TestCaseError::fail(format!("{e}\n{text}")))?;
         prop_assert_eq!(back, p);
     }
+
+    /// Fuzzing the parser: any text from BDDL's own characters, and any real file mutated (bytes
+    /// replaced, cut, duplicated), gives a problem or an error with a position inside the text,
+    /// never a panic.
+    #[test]
+    fn any_text_parses_or_gives_a_positioned_error(
+        text in "[()a-zA-Z0-9_:;. \n\t+*/-]{0,400}",
+    ) {
+        check_no_panic(&text)?;
+    }
+
+    #[test]
+    fn mutated_real_files_parse_or_give_a_positioned_error(
+        file in 0usize..4,
+        edits in proptest::collection::vec((any::<usize>(), 0u8..4, any::<u8>()), 1..6),
+    ) {
+        let mut bytes = FUZZ_SEEDS[file].as_bytes().to_vec();
+        for (at, kind, b) in edits {
+            let i = at % bytes.len().max(1);
+            match kind {
+                0 => if i < bytes.len() { bytes[i] = b"()a :-;\n0"[b as usize % 9] },
+                1 => bytes.truncate(i),
+                2 => { let tail = bytes[i..].to_vec(); bytes.extend_from_slice(&tail[..tail.len().min(64)]) }
+                _ => if i < bytes.len() { bytes.remove(i); },
+            }
+        }
+        check_no_panic(&String::from_utf8_lossy(&bytes))?;
+    }
+}
+
+/// Real files the mutation fuzzer starts from.
+const FUZZ_SEEDS: [&str; 4] = [
+    include_str!("fixtures/bddl/libero_spatial_tabletop.bddl"),
+    include_str!("fixtures/bddl/libero_10_kitchen_close_drawer_with_bowl.bddl"),
+    include_str!("fixtures/bddl/libero_90_study_caddy_yaw.bddl"),
+    include_str!("../tasks/libero_mem/t8.bddl"),
+];
+
+fn check_no_panic(text: &str) -> Result<(), TestCaseError> {
+    match bddl::parse_named("f.bddl", text) {
+        Ok(p) => {
+            // What parses prints and parses back to itself.
+            let back =
+                bddl::parse(&bddl::print(&p)).map_err(|e| TestCaseError::fail(e.to_string()))?;
+            prop_assert_eq!(back, p);
+        }
+        Err(e) => {
+            let lines = text.lines().count().max(1) as u32 + 1;
+            prop_assert!(
+                e.line >= 1 && e.line <= lines,
+                "line {} of {}",
+                e.line,
+                lines
+            );
+            prop_assert!(e.col >= 1, "col {}", e.col);
+            prop_assert!(e.to_string().starts_with("f.bddl:"), "{e}");
+        }
+    }
+    Ok(())
 }

@@ -356,8 +356,31 @@ impl Config {
         if !(0.0..=1.0).contains(&t.final_lr_fraction) {
             return bad("final_lr_fraction", "must be in [0, 1]");
         }
-        if t.grad_clip < 0.0 || t.weight_decay < 0.0 {
-            return bad("grad_clip / weight_decay", "must be ≥ 0");
+        // Written so that NaN fails every check (`NaN >= 0.0` is false).
+        let finite_nonneg = |x: f64| x >= 0.0 && x.is_finite();
+        if !finite_nonneg(t.grad_clip) {
+            return bad("grad_clip", "must be a finite number ≥ 0 (0 = no clipping)");
+        }
+        if !finite_nonneg(t.weight_decay) {
+            return bad("weight_decay", "must be a finite number ≥ 0");
+        }
+        if !((0.0..1.0).contains(&t.beta1) && (0.0..1.0).contains(&t.beta2)) {
+            return bad("beta1 / beta2", "must be in [0, 1)");
+        }
+        let w = &t.loss_weights;
+        for (key, v) in [
+            ("action", w.action),
+            ("contrastive", w.contrastive),
+            ("window", w.window),
+            ("slot_recon", w.slot_recon),
+        ] {
+            if let Some(v) = v
+                && !finite_nonneg(v)
+            {
+                return Err(format!(
+                    "train.loss_weights.{key}: must be a finite number ≥ 0 (got {v})"
+                ));
+            }
         }
         if let Some(g) = &self.data.generate {
             if g.episodes == 0 || g.val >= g.episodes {
@@ -577,6 +600,37 @@ variant = "e_slotssm"
     }
 
     #[test]
+    fn bad_numbers_are_named() {
+        let e = |extra: &str| Config::parse(&format!("{MIN}{extra}")).unwrap_err();
+        assert_eq!(
+            e("[train]\ngrad_clip = nan\n"),
+            "train.grad_clip: must be a finite number ≥ 0 (0 = no clipping)"
+        );
+        assert_eq!(
+            e("[train]\nweight_decay = nan\n"),
+            "train.weight_decay: must be a finite number ≥ 0"
+        );
+        assert_eq!(e("[train]\nlr = inf\n"), "train.lr: must be > 0");
+        assert_eq!(
+            e("[train]\nbeta2 = 1.0\n"),
+            "train.beta1 / beta2: must be in [0, 1)"
+        );
+        assert_eq!(
+            e("[train.loss_weights]\nwindow = nan\n"),
+            "train.loss_weights.window: must be a finite number ≥ 0 (got NaN)"
+        );
+        assert_eq!(e("[train]\nsteps = 0\n"), "train.steps: must be ≥ 1");
+        assert_eq!(
+            e("[model.overrides]\nimage_size = [0, 0]\n"),
+            "[model]: invalid model config: image_size [0, 0]: each side must be ≥ 8 pixels"
+        );
+        assert_eq!(
+            e("[model.overrides]\nwindow = { past = 100000 }\n"),
+            "[model]: invalid model config: window.past = 100000 is above the limit 1024"
+        );
+    }
+
+    #[test]
     fn set_overrides_apply_and_name_bad_keys() {
         let dir = tempfile::tempdir().unwrap();
         let p = dir.path().join("c.toml");
@@ -643,7 +697,7 @@ mod shipped {
         states.sort();
         assert_eq!(
             states,
-            ["libero_goal", "libero_mem", "t1", "t3", "t5", "tiny"]
+            ["libero_goal", "libero_mem", "t1", "t3", "t4", "t5", "tiny"]
         );
     }
 }

@@ -19,8 +19,8 @@ struct Args {
     /// Keep only the newest K checkpoints (0 = all); overrides [train].keep.
     #[arg(long)]
     keep: Option<usize>,
-    /// Total optimiser steps; overrides [train].steps.
-    #[arg(long)]
+    /// Total optimiser steps (≥ 1); overrides [train].steps.
+    #[arg(long, value_parser = clap::value_parser!(u64).range(1..))]
     steps: Option<u64>,
     /// Run directory (default: runs/<name>).
     #[arg(long)]
@@ -67,7 +67,7 @@ fn main() -> ExitCode {
     match run(args) {
         Ok(s) => {
             let fmt = |x: Option<f64>| x.map_or("-".into(), |v| format!("{v:.4}"));
-            println!(
+            data::outln!(
                 "{}: steps {}..{}, loss {} → {}, val {}, {:.2} steps/s",
                 s.run_dir.display(),
                 s.start_step,

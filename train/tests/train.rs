@@ -286,6 +286,19 @@ fn bad_config_key_is_an_error_naming_key_and_file_exit_2() {
     }
     let out = train_bin(&[dir.path().join("nope.toml").to_str().unwrap()]);
     assert_eq!(out.status.code(), Some(2));
+    // `--steps 0` is refused like `steps = 0`, and a NaN in the file names its key.
+    let p = dir.path().join("good.toml");
+    std::fs::write(&p, &good).unwrap();
+    let stderr = exit_2_stderr(&[p.to_str().unwrap(), "--steps", "0"]);
+    assert!(stderr.contains("--steps"), "{stderr}");
+    let nan = good.replace("grad_clip = 1.0", "grad_clip = nan");
+    assert_ne!(nan, good);
+    std::fs::write(&p, nan).unwrap();
+    let stderr = exit_2_stderr(&[p.to_str().unwrap()]);
+    assert!(
+        stderr.contains("good.toml") && stderr.contains("train.grad_clip: must be a finite number"),
+        "{stderr}"
+    );
 }
 
 #[test]

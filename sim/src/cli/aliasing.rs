@@ -21,17 +21,17 @@ pub fn run(
         sim::aliasing::AliasingError::Argument(m) => anyhow::Error::new(BadInput(m)),
         sim::aliasing::AliasingError::Env(e) => classify(e),
     })?;
-    println!(
+    data::outln!(
         "{}: {} frames from {episodes} expert episodes (seeds {seed}..{}) in {:.1} s; image {side}x{side} grey; neighbours exclude the same episode within ±{k} steps",
         spec.id,
         frames.len(),
         seed + episodes as u64 - 1,
         t0.elapsed().as_secs_f64()
     );
-    println!(
+    data::outln!(
         "\n| features    | frames | NN needs other next subgoal (index) | (text) | NN from another episode |"
     );
-    println!("|-------------|--------|------|------|------|");
+    data::outln!("|-------------|--------|------|------|------|");
     let both = analyse(&frames, Features::Both, k);
     for (name, which) in [
         ("image+state", Features::Both),
@@ -43,7 +43,7 @@ pub fn run(
         } else {
             analyse(&frames, which, k)
         };
-        println!(
+        data::outln!(
             "| {name:<11} | {:>6} | {:>5.1}% | {:>5.1}% | {:>5.1}% |",
             r.frames,
             100.0 * r.index_fraction,
@@ -51,11 +51,11 @@ pub fn run(
             100.0 * r.cross_episode
         );
     }
-    println!(
+    data::outln!(
         "\nPer next subgoal (image+state):\n\n| # | next subgoal | frames | aliased |\n|---|---|---|---|"
     );
     for (l, text, n, f) in &both.per_label {
-        println!("| {l} | {text} | {n} | {:.1}% |", 100.0 * f);
+        data::outln!("| {l} | {text} | {n} | {:.1}% |", 100.0 * f);
     }
     Ok(())
 }

@@ -47,23 +47,23 @@ pub fn run(action: AssetsCmd) -> anyhow::Result<()> {
             };
             let p = pack::install::install(&root, &report).map_err(not_installed)?;
             spinner.finish_and_clear();
-            println!("LIBERO pack installed in {}", p.root.display());
+            data::outln!("LIBERO pack installed in {}", p.root.display());
             Ok(())
         }
         AssetsCmd::Status => {
-            println!("cache: {}", root.display());
+            data::outln!("cache: {}", root.display());
             match LiberoPack::locate(&root) {
                 Ok(p) => {
-                    println!("libero: installed ({})", p.root.display());
+                    data::outln!("libero: installed ({})", p.root.display());
                     let tasks = pack::libero_tasks(&p)?;
                     for s in pack::LIBERO_SUITES {
-                        println!(
+                        data::outln!(
                             "  {s}: {} tasks",
                             tasks.iter().filter(|t| t.suite == s).count()
                         );
                     }
                 }
-                Err(e) => println!("libero: {e}"),
+                Err(e) => data::outln!("libero: {e}"),
             }
             Ok(())
         }

@@ -24,12 +24,15 @@ pub fn run(
             rows.push(sim::bench::run_task(&spec, p, steps).map_err(classify)?);
         }
         if json {
-            println!("{}", serde_json::to_string(&rows)?);
+            data::outln!("{}", serde_json::to_string(&rows)?);
         } else {
             for r in &rows {
-                println!(
+                data::outln!(
                     "{} [{}]: env steps/s {:.1} (2×128² RGB), {:.1} without rendering",
-                    r.task, r.assets, r.env_steps_per_s, r.env_state_only_steps_per_s
+                    r.task,
+                    r.assets,
+                    r.env_steps_per_s,
+                    r.env_state_only_steps_per_s
                 );
             }
         }
@@ -37,21 +40,21 @@ pub fn run(
     }
     let r = sim::bench::run(steps, rounds).map_err(classify)?;
     if json {
-        println!("{}", serde_json::to_string(&r)?);
+        data::outln!("{}", serde_json::to_string(&r)?);
     } else {
-        println!("renderer               {}", r.gl_renderer);
-        println!("physics steps/s        {:>10.0}", r.physics_steps_per_s);
-        println!("render fps (128², RGB) {:>10.1}", r.render_fps_128);
-        println!(
+        data::outln!("renderer               {}", r.gl_renderer);
+        data::outln!("physics steps/s        {:>10.0}", r.physics_steps_per_s);
+        data::outln!("render fps (128², RGB) {:>10.1}", r.render_fps_128);
+        data::outln!(
             "raw loop steps/s       {:>10.1}  (25 substeps + 2×128² RGB, bare FFI)",
             r.raw_loop_steps_per_s
         );
-        println!(
+        data::outln!(
             "env steps/s            {:>10.1}  (same work through Env)",
             r.env_steps_per_s
         );
-        println!("env / raw              {:>10.3}", r.env_over_raw);
-        println!(
+        data::outln!("env / raw              {:>10.3}", r.env_over_raw);
+        data::outln!(
             "env steps/s, no render {:>10.1}",
             r.env_state_only_steps_per_s
         );

@@ -58,7 +58,7 @@ pub fn run(
         "-".repeat(9),
         "-".repeat(8)
     );
-    println!("{header}\n{rule}");
+    data::outln!("{header}\n{rule}");
     let t0 = std::time::Instant::now();
     let results: std::sync::Mutex<Vec<Option<Vec<sim::expert::EpisodeResult>>>> =
         std::sync::Mutex::new(vec![None; tasks.len()]);
@@ -120,7 +120,7 @@ pub fn run(
             max,
             spec.max_steps
         );
-        println!("{row}");
+        data::outln!("{row}");
         rows.push(row);
     }
     let secs = t0.elapsed().as_secs_f64();
@@ -130,7 +130,7 @@ pub fn run(
         total_steps as f64 / secs,
         if workers == 1 { "" } else { "s" }
     );
-    println!("\n{thr}");
+    data::outln!("\n{thr}");
     if let Some(md) = markdown {
         let mut s = String::new();
         s.push_str("# Scripted expert: success and episode lengths\n\n");

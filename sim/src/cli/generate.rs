@@ -42,7 +42,7 @@ pub fn run(task: String, out: PathBuf, cfg: sim::generate::GenerateConfig) -> an
         })?;
         bar.finish_and_clear();
         let steps: usize = index.episodes.iter().map(|e| e.length).sum();
-        println!(
+        data::outln!(
             "{}: {} episodes ({} steps) in {} in {:.1} s",
             t.id,
             index.episodes.len(),
@@ -54,7 +54,7 @@ pub fn run(task: String, out: PathBuf, cfg: sim::generate::GenerateConfig) -> an
     if tasks.len() > 1 {
         // Every task is recorded above: only the suite's index is left.
         let index = sim::generate::write_index(&out, &cfg)?;
-        println!(
+        data::outln!(
             "suite index: {} episodes of {} tasks in {}",
             index.episodes.len(),
             tasks.len(),

@@ -7,15 +7,15 @@ use sim::render::{RenderQuality, Renderer};
 /// Prints the MuJoCo version, the EGL platform and GL strings, and the minimal scene's sizes.
 pub fn run() -> anyhow::Result<()> {
     mujoco::init()?;
-    println!("mujoco_version: {}", mujoco::version());
+    data::outln!("mujoco_version: {}", mujoco::version());
     let model = Model::from_xml_str(&minimal_scene_xml())?;
     let r = Renderer::new(&model, 64, 64, RenderQuality::default())?;
     let gl = r.gl_info();
-    println!("egl_platform: {}", gl.platform);
-    println!("gl_vendor: {}", gl.vendor);
-    println!("gl_renderer: {}", gl.renderer);
-    println!("gl_version: {}", gl.version);
-    println!(
+    data::outln!("egl_platform: {}", gl.platform);
+    data::outln!("gl_vendor: {}", gl.vendor);
+    data::outln!("gl_renderer: {}", gl.renderer);
+    data::outln!("gl_version: {}", gl.version);
+    data::outln!(
         "scene: nq {} nv {} nu {} ngeom {}",
         model.nq(),
         model.nv(),

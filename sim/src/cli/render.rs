@@ -93,7 +93,7 @@ pub fn run(o: Options) -> anyhow::Result<()> {
         }
     };
     save_png(&frame, &out).with_context(|| format!("writing {}", out.display()))?;
-    println!("wrote {} ({size}x{size}, camera {camera})", out.display());
+    data::outln!("wrote {} ({size}x{size}, camera {camera})", out.display());
     Ok(())
 }
 

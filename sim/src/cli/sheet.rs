@@ -30,7 +30,7 @@ pub fn run(out: PathBuf, seed: u64, size: usize, camera: String) -> anyhow::Resu
     }
     let img = sim::sheet::contact_sheet(&tiles, 5).context("no tiles")?;
     data::fsio::write_png(&out, &img)?;
-    println!(
+    data::outln!(
         "wrote {} ({} tasks, seed {seed}, camera {camera})",
         out.display(),
         tiles.len()

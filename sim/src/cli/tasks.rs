@@ -2,11 +2,14 @@
 
 /// Prints one line per shipped task.
 pub fn run() -> anyhow::Result<()> {
-    println!("{:<58} {:>4} {:>6}  instruction", "id", "goal", "steps");
+    data::outln!("{:<58} {:>4} {:>6}  instruction", "id", "goal", "steps");
     for t in sim::task::list() {
-        println!(
+        data::outln!(
             "{:<58} {:>4} {:>6}  {}",
-            t.id, t.goal_len, t.max_steps, t.instruction
+            t.id,
+            t.goal_len,
+            t.max_steps,
+            t.instruction
         );
     }
     Ok(())

@@ -37,6 +37,10 @@ impl Sexp {
     }
 }
 
+/// The deepest nesting of parentheses accepted. LIBERO's files nest at most 5 levels; the limit
+/// keeps the recursive walks over the tree (goals, printing, dropping) far from a stack overflow.
+pub const MAX_DEPTH: usize = 64;
+
 /// Reads `text` into its single top-level expression.
 pub(crate) fn read_tree(text: &str) -> Result<Sexp, BddlError> {
     let mut stack: Vec<(Vec<Sexp>, Span)> = Vec::new();
@@ -84,6 +88,12 @@ pub(crate) fn read_tree(text: &str) -> Result<Sexp, BddlError> {
             }
             '(' => {
                 flush(&mut word, word_span, &mut stack, &mut top);
+                if stack.len() == MAX_DEPTH {
+                    return Err(BddlError::at(
+                        here,
+                        format!("parentheses nested deeper than {MAX_DEPTH} levels"),
+                    ));
+                }
                 stack.push((Vec::new(), here));
             }
             ')' => {

@@ -37,6 +37,7 @@ mod print;
 pub use ast::{Atom, Goal, Instance, Problem, ProblemClass, Region};
 pub use category::{Category, WORKSPACE_CATEGORIES, short_words};
 pub use error::{BddlError, Span};
+pub use lex::MAX_DEPTH;
 pub use predicate::{PREDICATES, Predicate};
 pub use print::print;
 

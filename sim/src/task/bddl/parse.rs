@@ -558,16 +558,15 @@ pub(crate) fn eval_expr(text: &str) -> Option<f64> {
             Some(v)
         }
         fn unary(&mut self) -> Option<f64> {
-            match self.peek()? {
-                b'-' => {
-                    self.i += 1;
-                    Some(-self.unary()?)
+            // Signs are read in a loop, not by recursion: `------…1` cannot exhaust the stack.
+            let mut sign = 1.0;
+            loop {
+                match self.peek()? {
+                    b'-' => sign = -sign,
+                    b'+' => {}
+                    _ => return Some(sign * self.atom()?),
                 }
-                b'+' => {
-                    self.i += 1;
-                    self.unary()
-                }
-                _ => self.atom(),
+                self.i += 1;
             }
         }
         fn atom(&mut self) -> Option<f64> {
@@ -625,6 +624,11 @@ mod tests {
         assert_eq!(eval_expr("1e-3"), Some(1e-3));
         assert_eq!(eval_expr("-0.5+1"), Some(0.5));
         assert_eq!(eval_expr("0.0"), Some(0.0));
+        assert_eq!(eval_expr("--1"), Some(1.0));
+        assert_eq!(eval_expr("-+-+-2"), Some(-2.0));
+        // A long chain of signs is a loop, not a recursion.
+        assert_eq!(eval_expr(&format!("{}1", "-".repeat(100_001))), Some(-1.0));
+        assert_eq!(eval_expr(&"-".repeat(100_000)), None);
         assert_eq!(eval_expr("abc"), None);
         assert_eq!(eval_expr("1/"), None);
         assert_eq!(eval_expr(""), None);
