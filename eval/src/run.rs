@@ -19,9 +19,26 @@ impl From<model::ModelError> for EvalError {
     }
 }
 
-/// Opens `dir` as [`RunDir::open`] does.
+/// Opens `dir` as [`RunDir::open`] does (the newest checkpoint that verifies, the trainer's rule)
+/// and says on stderr which checkpoint it uses and which newer ones it skipped, and why.
 pub fn open(dir: impl AsRef<Path>) -> Result<RunDir, EvalError> {
-    Ok(RunDir::open(dir)?)
+    let run = RunDir::open(dir)?;
+    for (skipped, why) in &run.skipped {
+        eprintln!(
+            "warning: skipping corrupt checkpoint {}: {why}",
+            skipped.display()
+        );
+    }
+    let note = match run.verified {
+        model::run::Verified::Manifest => "verified against its manifest",
+        model::run::Verified::NoManifest => "no manifest (written before manifests): not verified",
+    };
+    eprintln!(
+        "checkpoint {} (step {}): {note}",
+        run.checkpoint.display(),
+        run.step
+    );
+    Ok(run)
 }
 
 /// The device a run evaluates on by default (the backend it was trained on).

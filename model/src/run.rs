@@ -11,8 +11,14 @@
 //!   checkpoints/
 //!     latest            one line: the name of the newest complete checkpoint
 //!     step_<N>/         model.bpk (weights) and state.json ({ step, model, … }); trainers add
-//!                       their own files (optimiser moments, sampler position, config)
+//!                       their own files (optimiser moments, sampler position, config);
+//!                       manifest.json: the step and the size and sha256 of every other file
 //! ```
+//!
+//! A checkpoint is trusted only once verified ([`verify_checkpoint`]): its manifest matches its
+//! files byte for byte, and its directory, manifest and `state.json` name the same step. Readers
+//! take the first verified one of [`candidates`] ([`newest_valid`]), the same rule in the trainer
+//! (resume) and the evaluator, and report the ones they skipped.
 //!
 //! Checkpoints are written atomically: every file goes into a temporary directory that is synced
 //! and renamed to its final name, and `latest` (itself replaced by rename) is written last. A run
@@ -49,6 +55,187 @@ pub const WEIGHTS: &str = "model.bpk";
 pub const STATE_JSON: &str = "state.json";
 /// Format tag of `run.json`.
 pub const RUN_FORMAT: &str = "libero-mem-rs/run/1";
+/// The manifest of a checkpoint: its step and the size and sha256 of every other file.
+pub const MANIFEST: &str = "manifest.json";
+/// Format tag of `manifest.json`.
+pub const MANIFEST_FORMAT: &str = "libero-mem-rs/checkpoint-manifest/1";
+
+/// `manifest.json`.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Manifest {
+    /// [`MANIFEST_FORMAT`].
+    pub format: String,
+    /// The checkpoint's step.
+    pub step: u64,
+    /// Every other file of the checkpoint, by name: size and sha256.
+    pub files: std::collections::BTreeMap<String, FileDigest>,
+}
+
+/// Size and sha256 (lowercase hex) of one file.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct FileDigest {
+    /// Bytes.
+    pub bytes: u64,
+    /// sha256, lowercase hex.
+    pub sha256: String,
+}
+
+/// Size and sha256 of the file at `path`, read in 1 MiB blocks.
+pub fn digest(path: &Path) -> Result<FileDigest> {
+    use sha2::Digest;
+    use std::io::Read;
+    let mut f = fs::File::open(path).map_err(|e| io_error(path, e))?;
+    let mut hasher = sha2::Sha256::new();
+    let mut buf = vec![0u8; 1 << 20];
+    let mut bytes = 0u64;
+    loop {
+        let n = f.read(&mut buf).map_err(|e| io_error(path, e))?;
+        if n == 0 {
+            break;
+        }
+        hasher.update(&buf[..n]);
+        bytes += n as u64;
+    }
+    let sha256 = hasher
+        .finalize()
+        .iter()
+        .map(|b| format!("{b:02x}"))
+        .collect();
+    Ok(FileDigest { bytes, sha256 })
+}
+
+/// The manifest of the files now in checkpoint directory `dir` (all but the manifest itself).
+fn manifest_of(dir: &Path, step: u64) -> Result<Manifest> {
+    let mut files = std::collections::BTreeMap::new();
+    for e in fs::read_dir(dir).map_err(|e| io_error(dir, e))? {
+        let e = e.map_err(|e| io_error(dir, e))?;
+        let name = e.file_name().to_string_lossy().into_owned();
+        if name != MANIFEST && e.path().is_file() {
+            files.insert(name, digest(&e.path())?);
+        }
+    }
+    Ok(Manifest {
+        format: MANIFEST_FORMAT.into(),
+        step,
+        files,
+    })
+}
+
+/// How far a checkpoint could be verified.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Verified {
+    /// Its manifest matches every file.
+    Manifest,
+    /// Written before manifests existed: only its `state.json` and step could be checked.
+    NoManifest,
+}
+
+/// Verifies checkpoint `dir` and returns the policy part of its `state.json`: the manifest
+/// (when there is one) matches every file's size and sha256 and lists every file, and the
+/// directory name, the manifest and `state.json` agree on the step. Any mismatch is an error
+/// naming the file.
+pub fn verify_checkpoint(dir: &Path) -> Result<(CheckpointInfo, Verified)> {
+    let info = read_checkpoint(dir)?;
+    let name = dir.file_name().map(|n| n.to_string_lossy().into_owned());
+    if let Some(step) = name.as_deref().and_then(step_of)
+        && step != info.step
+    {
+        return Err(ModelError::run(
+            dir.join(STATE_JSON),
+            format!("says step {}, its directory step {step}", info.step),
+        ));
+    }
+    let path = dir.join(MANIFEST);
+    if !path.exists() {
+        return Ok((info, Verified::NoManifest));
+    }
+    let manifest: Manifest = read_json(&path, "checkpoint manifest")?;
+    if manifest.format != MANIFEST_FORMAT {
+        return Err(ModelError::run(
+            &path,
+            format!("format `{}`, expected `{MANIFEST_FORMAT}`", manifest.format),
+        ));
+    }
+    if manifest.step != info.step {
+        return Err(ModelError::run(
+            &path,
+            format!("says step {}, state.json step {}", manifest.step, info.step),
+        ));
+    }
+    let now = manifest_of(dir, info.step)?;
+    for (name, want) in &manifest.files {
+        match now.files.get(name) {
+            None => {
+                return Err(ModelError::run(
+                    dir.join(name),
+                    "missing (listed in manifest.json)",
+                ));
+            }
+            Some(got) if got.bytes != want.bytes => {
+                return Err(ModelError::run(
+                    dir.join(name),
+                    format!("{} bytes, manifest.json says {}", got.bytes, want.bytes),
+                ));
+            }
+            Some(got) if got.sha256 != want.sha256 => {
+                return Err(ModelError::run(
+                    dir.join(name),
+                    "content differs from manifest.json (sha256 mismatch): the file is corrupt",
+                ));
+            }
+            Some(_) => {}
+        }
+    }
+    if let Some(extra) = now.files.keys().find(|k| !manifest.files.contains_key(*k)) {
+        return Err(ModelError::run(
+            dir.join(extra),
+            "not listed in manifest.json",
+        ));
+    }
+    Ok((info, Verified::Manifest))
+}
+
+/// The checkpoint a reader uses, and the ones it skipped on the way.
+#[derive(Clone, Debug)]
+pub struct Chosen {
+    /// Its directory.
+    pub dir: PathBuf,
+    /// The policy part of its `state.json`.
+    pub info: CheckpointInfo,
+    /// Whether a manifest vouched for it.
+    pub verified: Verified,
+    /// Newer checkpoints that failed verification, with the reason.
+    pub skipped: Vec<(PathBuf, String)>,
+}
+
+/// The first checkpoint of [`candidates`] that verifies ([`verify_checkpoint`]). None when the
+/// run has no complete checkpoint; an error (the newest one's) when none verifies.
+pub fn newest_valid(run_dir: &Path) -> Result<Option<Chosen>> {
+    let mut skipped = vec![];
+    let mut first_err = None;
+    for dir in candidates(run_dir)? {
+        match verify_checkpoint(&dir) {
+            Ok((info, verified)) => {
+                return Ok(Some(Chosen {
+                    dir,
+                    info,
+                    verified,
+                    skipped,
+                }));
+            }
+            Err(e) => {
+                skipped.push((dir, e.to_string()));
+                first_err.get_or_insert(e);
+            }
+        }
+    }
+    match first_err {
+        Some(e) => Err(e),
+        None => Ok(None),
+    }
+}
 
 /// `run.json`: what a run is besides its model.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -183,6 +370,8 @@ pub fn save_checkpoint(
         ));
     }
     write_synced(&t.join(STATE_JSON), json.as_bytes())?;
+    let manifest = manifest_of(t, step)?;
+    write_synced(&t.join(MANIFEST), pretty(&manifest).as_bytes())?;
     sync_dir(t);
     let final_dir = root.join(checkpoint_name(step));
     if final_dir.exists() {
@@ -216,7 +405,8 @@ pub fn list(run_dir: &Path) -> Result<Vec<(u64, PathBuf)>> {
     Ok(v)
 }
 
-/// Removes the temporaries that a killed run left behind.
+/// Removes what a killed run left behind: temporary directories (`.tmp-*`) and step
+/// directories without a `state.json` (a checkpoint being replaced when the run died).
 pub fn clean_temporaries(run_dir: &Path) -> Result<()> {
     let root = run_dir.join(CHECKPOINTS);
     if !root.is_dir() {
@@ -224,7 +414,9 @@ pub fn clean_temporaries(run_dir: &Path) -> Result<()> {
     }
     for e in fs::read_dir(&root).map_err(|e| io_error(&root, e))? {
         let e = e.map_err(|e| io_error(&root, e))?;
-        if e.file_name().to_string_lossy().starts_with(".tmp-") {
+        let name = e.file_name().to_string_lossy().into_owned();
+        let incomplete = step_of(&name).is_some() && !e.path().join(STATE_JSON).is_file();
+        if name.starts_with(".tmp-") || incomplete {
             let p = e.path();
             let r = if p.is_dir() {
                 fs::remove_dir_all(&p)
@@ -317,10 +509,14 @@ pub struct RunDir {
     pub model: ModelConfig,
     /// `processor.json`, built.
     pub processor: Processor,
-    /// The checkpoint used (the one `latest` names, else the newest complete one).
+    /// The checkpoint used: the first of [`candidates`] that verifies ([`newest_valid`]).
     pub checkpoint: PathBuf,
     /// Optimiser steps of that checkpoint.
     pub step: u64,
+    /// Whether a manifest vouched for the checkpoint's files.
+    pub verified: Verified,
+    /// Newer checkpoints that failed verification, with the reason.
+    pub skipped: Vec<(PathBuf, String)>,
 }
 
 impl RunDir {
@@ -347,13 +543,13 @@ impl RunDir {
             Processor::from_config(read_json::<ProcessorConfig>(&proc_path, "processor")?)
                 .and_then(|p| p.check_model(&model).map(|_| p))
                 .map_err(|e| ModelError::run(&proc_path, e.to_string()))?;
-        let checkpoint = candidates(dir)?.into_iter().next().ok_or_else(|| {
+        let chosen = newest_valid(dir)?.ok_or_else(|| {
             ModelError::run(
                 dir.join(CHECKPOINTS),
                 "no complete checkpoint (has the run trained past its first checkpoint?)",
             )
         })?;
-        let state = read_checkpoint(&checkpoint)?;
+        let (checkpoint, state) = (chosen.dir, chosen.info);
         if let Some(diff) = model_difference(&state.model, &model) {
             return Err(ModelError::run(
                 &checkpoint,
@@ -367,6 +563,8 @@ impl RunDir {
             processor,
             step: state.step,
             checkpoint,
+            verified: chosen.verified,
+            skipped: chosen.skipped,
         })
     }
 
@@ -403,7 +601,7 @@ mod tests {
         for s in [10, 20, 30] {
             fake(run, s);
         }
-        // Incomplete: no state.json (never renamed into place by `save`, but be safe).
+        // Incomplete: no state.json (left when a run dies while replacing a checkpoint).
         fs::create_dir_all(run.join(CHECKPOINTS).join(checkpoint_name(40))).unwrap();
         fs::create_dir_all(run.join(CHECKPOINTS).join(".tmp-x")).unwrap();
         let names = |v: Vec<PathBuf>| -> Vec<String> {
@@ -419,11 +617,92 @@ mod tests {
         assert_eq!(names(candidates(run).unwrap())[0], "step_000000020");
         clean_temporaries(run).unwrap();
         assert!(!run.join(CHECKPOINTS).join(".tmp-x").exists());
+        assert!(!run.join(CHECKPOINTS).join(checkpoint_name(40)).exists());
         // keep 1: the newest stays, and so does the one `latest` names.
         prune(run, 1).unwrap();
         let left: Vec<u64> = list(run).unwrap().iter().map(|x| x.0).collect();
         assert_eq!(left, vec![20, 30]);
         assert!(read_checkpoint(&run.join(CHECKPOINTS).join(checkpoint_name(30))).is_err());
+    }
+
+    /// A checkpoint of `step` with a real state.json, fake weights and its manifest.
+    fn fake_with_manifest(run: &Path, step: u64) -> PathBuf {
+        let d = run.join(CHECKPOINTS).join(checkpoint_name(step));
+        fs::create_dir_all(&d).unwrap();
+        let info = CheckpointInfo {
+            step,
+            model: ModelConfig::tiny(crate::config::Variant::Dense { history: 1 }),
+        };
+        fs::write(d.join(STATE_JSON), pretty(&info)).unwrap();
+        fs::write(d.join(WEIGHTS), vec![7u8; 5000]).unwrap();
+        let m = manifest_of(&d, step).unwrap();
+        fs::write(d.join(MANIFEST), pretty(&m)).unwrap();
+        d
+    }
+
+    #[test]
+    fn manifests_catch_corrupt_files_and_readers_fall_back_to_the_newest_valid() {
+        let tmp = tempfile::tempdir().unwrap();
+        let run = tmp.path();
+        let old = fake_with_manifest(run, 10);
+        let new = fake_with_manifest(run, 20);
+        let (info, v) = verify_checkpoint(&new).unwrap();
+        assert_eq!((info.step, v), (20, Verified::Manifest));
+        let m: Manifest = read_json(&new.join(MANIFEST), "m").unwrap();
+        assert_eq!(m.files[WEIGHTS].bytes, 5000);
+        assert_eq!(m.files[WEIGHTS].sha256.len(), 64);
+        let err = |d: &Path| verify_checkpoint(d).unwrap_err().to_string();
+
+        // One flipped bit in the weights.
+        let mut w = fs::read(new.join(WEIGHTS)).unwrap();
+        w[1234] ^= 0x10;
+        fs::write(new.join(WEIGHTS), &w).unwrap();
+        assert!(
+            err(&new).contains("model.bpk: content differs from manifest.json (sha256 mismatch)")
+        );
+        // Truncated weights.
+        fs::write(new.join(WEIGHTS), &w[..100]).unwrap();
+        assert!(err(&new).contains("model.bpk: 100 bytes, manifest.json says 5000"));
+        // The newest is skipped with its reason, the older one is used.
+        let chosen = newest_valid(run).unwrap().unwrap();
+        assert_eq!((chosen.dir.clone(), chosen.info.step), (old.clone(), 10));
+        assert_eq!(chosen.skipped.len(), 1);
+        assert!(
+            chosen.skipped[0].1.contains("model.bpk: 100 bytes"),
+            "{:?}",
+            chosen.skipped
+        );
+
+        // state.json claiming another step: caught by its directory name and by the manifest.
+        let state = fs::read_to_string(old.join(STATE_JSON)).unwrap();
+        fs::write(
+            old.join(STATE_JSON),
+            state.replace("\"step\": 10", "\"step\": 999999"),
+        )
+        .unwrap();
+        assert!(
+            err(&old).contains("says step 999999, its directory step 10"),
+            "{}",
+            err(&old)
+        );
+        // Every candidate bad: the newest one's error.
+        let e = newest_valid(run).unwrap_err().to_string();
+        assert!(
+            e.contains("step_000000020") && e.contains("model.bpk"),
+            "{e}"
+        );
+
+        // A file the manifest does not list, and a listed file gone.
+        let d = fake_with_manifest(run, 30);
+        fs::write(d.join("extra.bin"), b"x").unwrap();
+        assert!(err(&d).contains("extra.bin: not listed in manifest.json"));
+        fs::remove_file(d.join("extra.bin")).unwrap();
+        fs::remove_file(d.join(WEIGHTS)).unwrap();
+        assert!(err(&d).contains("model.bpk: missing (listed in manifest.json)"));
+        // Written before manifests: accepted as such, flagged.
+        let d = fake_with_manifest(run, 40);
+        fs::remove_file(d.join(MANIFEST)).unwrap();
+        assert_eq!(verify_checkpoint(&d).unwrap().1, Verified::NoManifest);
     }
 
     #[test]

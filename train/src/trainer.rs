@@ -269,6 +269,22 @@ pub fn train(cfg: &Config, opts: &TrainOptions) -> Result<TrainSummary> {
     let mut loaded = None;
     let mut last_err = None;
     for dir in candidates.drain(..) {
+        // The evaluator's rule (model::run::newest_valid): verify against the manifest first.
+        match model::run::verify_checkpoint(&dir) {
+            Ok((_, model::run::Verified::Manifest)) => {}
+            Ok((_, model::run::Verified::NoManifest)) => eprintln!(
+                "warning: checkpoint {} has no manifest (written before manifests): its files are not verified",
+                dir.display()
+            ),
+            Err(e) => {
+                eprintln!(
+                    "warning: skipping corrupt checkpoint {}: {e}",
+                    dir.display()
+                );
+                last_err = Some(TrainError::from(e));
+                continue;
+            }
+        }
         match checkpoint::load(&dir, &mcfg, new_optimizer(&cfg), &ad) {
             Ok(l) => {
                 loaded = Some(l);

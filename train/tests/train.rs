@@ -382,6 +382,51 @@ fn missing_dataset_is_generated_through_the_simulator_then_trained_on() {
 }
 
 #[test]
+fn corrupt_newest_checkpoint_is_skipped_by_resume_and_by_the_evaluator_alike() {
+    let _g = serial();
+    let (a, b) = (tempfile::tempdir().unwrap(), tempfile::tempdir().unwrap());
+    let cfg = short_config(8, 4);
+    train::train(&cfg, &opts(a.path())).unwrap();
+    let stop = TrainOptions {
+        stop_at: Some(8),
+        ..opts(b.path())
+    };
+    train::train(&cfg, &stop).unwrap();
+    let ck = b.path().join("checkpoints");
+    for name in ["model.bpk", "optim.bpk", "state.json", "manifest.json"] {
+        assert!(ck.join("step_000000008").join(name).is_file(), "{name}");
+    }
+    // 50 flipped bits in the newest weights.
+    let w = ck.join("step_000000008/model.bpk");
+    let mut bytes = std::fs::read(&w).unwrap();
+    for k in 0..50 {
+        let i = (k * 7919) % bytes.len();
+        bytes[i] ^= 1 << (k % 8);
+    }
+    std::fs::write(&w, &bytes).unwrap();
+    // The evaluator's reader and the trainer fall back to step 4, and say why.
+    let run = model::RunDir::open(b.path()).unwrap();
+    assert_eq!(run.step, 4);
+    assert!(
+        run.skipped[0].1.contains("sha256 mismatch"),
+        "{:?}",
+        run.skipped
+    );
+    let s = train::train(&cfg, &opts(b.path())).unwrap();
+    assert_eq!((s.start_step, s.step), (4, 8));
+    // Redoing steps 5..8 from step 4 gives the uninterrupted run's weights.
+    assert_eq!(
+        bits(&final_weights(a.path())),
+        bits(&final_weights(b.path()))
+    );
+    // A step dir left empty by a kill is removed, not kept past pruning.
+    std::fs::create_dir_all(ck.join("step_000000025")).unwrap();
+    let s = train::train(&short_config(9, 4), &opts(b.path())).unwrap();
+    assert_eq!((s.start_step, s.step), (8, 9));
+    assert!(!ck.join("step_000000025").exists());
+}
+
+#[test]
 fn incompatible_checkpoint_exits_2() {
     let _g = serial();
     let dir = tempfile::tempdir().unwrap();
