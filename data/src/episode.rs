@@ -536,6 +536,11 @@ impl EpisodeReader {
         Self::from_bytes(path, bytes)
     }
 
+    /// The whole file, as read.
+    pub fn file_bytes(&self) -> &[u8] {
+        &self.bytes
+    }
+
     /// Validates an episode held in memory; `path` is only used in error messages.
     pub fn from_bytes(path: PathBuf, bytes: Arc<[u8]>) -> Result<Self> {
         let n = bytes.len() as u64;

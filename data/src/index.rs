@@ -45,6 +45,60 @@ pub struct EpisodeEntry {
     pub seed: u64,
     /// Split.
     pub split: Split,
+    /// File size in bytes (absent in indexes written before integrity checks).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub bytes: Option<u64>,
+    /// CRC-32 of the whole file, checked every time the episode is opened for training
+    /// ([`EpisodeEntry::open`]; absent in indexes written before integrity checks).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub crc32: Option<u32>,
+}
+
+impl EpisodeEntry {
+    /// Opens this episode of dataset `dir` and checks it against the index before it is trusted:
+    /// size and CRC-32 of the whole file (every byte, the header and the summary included),
+    /// then the mcap structure and the step count. A mismatch is bad input naming the file.
+    pub fn open(&self, dir: &Path) -> Result<EpisodeReader> {
+        let path = dir.join(&self.file);
+        let bytes: std::sync::Arc<[u8]> = std::fs::read(&path)
+            .map_err(|e| DataError::io(&path, e))?
+            .into();
+        let stale = "index.json was built from other files (rebuild it with `data stats DIR`, or regenerate the episode)";
+        if let Some(n) = self.bytes
+            && n != bytes.len() as u64
+        {
+            return Err(DataError::invalid(
+                &path,
+                format!(
+                    "{} bytes, index.json says {n}: truncated or replaced; {stale}",
+                    bytes.len()
+                ),
+            ));
+        }
+        if let Some(crc) = self.crc32 {
+            let got = crc32fast::hash(&bytes);
+            if got != crc {
+                return Err(DataError::invalid(
+                    &path,
+                    format!(
+                        "CRC-32 {got:08x}, index.json says {crc:08x}: the file is corrupt; {stale}"
+                    ),
+                ));
+            }
+        }
+        let r = EpisodeReader::from_bytes(path, bytes)?;
+        if r.len() != self.length {
+            return Err(DataError::invalid(
+                r.path(),
+                format!(
+                    "has {} steps, index.json says {} (rebuild it with `data stats`)",
+                    r.len(),
+                    self.length
+                ),
+            ));
+        }
+        Ok(r)
+    }
 }
 
 /// Per-dimension statistics of a vector quantity (OpenVLA's `dataset_statistics.json` fields).
@@ -250,6 +304,7 @@ pub fn build_index(dir: impl AsRef<Path>, opts: &IndexOptions) -> Result<Dataset
         .par_iter()
         .map(|p| {
             let r = EpisodeReader::open(p)?;
+            let (bytes, crc32) = (r.file_bytes().len() as u64, crc32fast::hash(r.file_bytes()));
             let raw = r.read_raw_steps(0..r.len())?;
             let mut texts = vec![r.meta().instruction.clone()];
             for s in &raw {
@@ -277,6 +332,8 @@ pub fn build_index(dir: impl AsRef<Path>, opts: &IndexOptions) -> Result<Dataset
                     instruction: r.meta().instruction.clone(),
                     seed: r.meta().seed,
                     split: Split::Train,
+                    bytes: Some(bytes),
+                    crc32: Some(crc32),
                 },
                 actions: raw.iter().map(|s| s.action).collect(),
                 states: raw.iter().map(|s| s.state).collect(),

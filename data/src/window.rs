@@ -227,20 +227,7 @@ impl WindowDataset {
         let readers: Vec<(usize, Arc<EpisodeReader>)> = index
             .split(split)
             .par_iter()
-            .map(|(i, e)| {
-                let r = EpisodeReader::open(dir.join(&e.file))?;
-                if r.len() != e.length {
-                    return Err(DataError::invalid(
-                        r.path(),
-                        format!(
-                            "has {} steps, index.json says {} (rebuild it with `data stats`)",
-                            r.len(),
-                            e.length
-                        ),
-                    ));
-                }
-                Ok((*i, Arc::new(r)))
-            })
+            .map(|(i, e)| Ok((*i, Arc::new(e.open(dir)?))))
             .collect::<Result<_>>()?;
         let samples = readers
             .iter()

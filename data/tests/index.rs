@@ -115,3 +115,60 @@ fn suite_index_covers_subfolders_with_relative_paths() {
     .unwrap();
     assert!(ds.num_episodes() >= 3);
 }
+
+#[test]
+fn episodes_are_checked_against_the_index_when_opened() {
+    let dir = tempfile::tempdir().unwrap();
+    let opts = SynthOptions {
+        size: 8,
+        segmentation: false,
+        depth: false,
+    };
+    let path = dir.path().join("ep0.mcap");
+    let mut w = EpisodeWriter::create(&path, synthetic_meta(0), WriterOptions::default()).unwrap();
+    for s in &synthetic_steps(12, 0, &opts) {
+        w.write_step(s).unwrap();
+    }
+    w.finish().unwrap();
+    let idx = build_index(dir.path(), &IndexOptions::default()).unwrap();
+    let e = &idx.episodes[0];
+    let good = std::fs::read(&path).unwrap();
+    assert_eq!(e.bytes, Some(good.len() as u64));
+    assert_eq!(e.crc32, Some(crc32fast::hash(&good)));
+    assert_eq!(e.open(dir.path()).unwrap().len(), 12);
+    let err = |bytes: &[u8]| {
+        std::fs::write(&path, bytes).unwrap();
+        let e = e.open(dir.path()).unwrap_err();
+        assert_eq!(e.exit_code(), 2, "{e}");
+        e.to_string()
+    };
+    // One flipped bit anywhere (here in the header record, which the readers never revisit).
+    let mut flipped = good.clone();
+    flipped[20] ^= 0x01;
+    let m = err(&flipped);
+    assert!(
+        m.contains("ep0.mcap") && m.contains("the file is corrupt"),
+        "{m}"
+    );
+    assert!(
+        m.contains(&format!("index.json says {:08x}", crc32fast::hash(&good))),
+        "{m}"
+    );
+    // Truncated.
+    let m = err(&good[..good.len() - 10]);
+    assert!(
+        m.contains(&format!(
+            "{} bytes, index.json says {}",
+            good.len() - 10,
+            good.len()
+        )),
+        "{m}"
+    );
+    // An index written before the checks: size and CRC are not known, the structure still is.
+    let mut legacy = e.clone();
+    (legacy.bytes, legacy.crc32) = (None, None);
+    std::fs::write(&path, &flipped[..flipped.len() - 10]).unwrap();
+    assert!(legacy.open(dir.path()).is_err());
+    std::fs::write(&path, &good).unwrap();
+    assert!(legacy.open(dir.path()).is_ok());
+}

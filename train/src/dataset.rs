@@ -383,7 +383,7 @@ pub fn state_spec(dir: &Path, index: &DatasetIndex) -> Result<StateSpec> {
         .par_iter()
         .map(|e| -> Result<StateStats> {
             let path = dir.join(&e.file);
-            let r = data::EpisodeReader::open(&path)?;
+            let r = e.open(dir)?;
             let steps = r.read_raw_steps(0..r.len())?;
             let missing = || {
                 TrainError::Usage(format!(
@@ -423,7 +423,7 @@ pub fn state_spec(dir: &Path, index: &DatasetIndex) -> Result<StateSpec> {
 pub fn check_goals(dir: &Path, index: &DatasetIndex) -> Result<()> {
     for e in &index.episodes {
         let path = dir.join(&e.file);
-        let r = data::EpisodeReader::open(&path)?;
+        let r = e.open(dir)?;
         let has_channel = r
             .channels()
             .iter()
