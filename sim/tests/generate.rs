@@ -54,6 +54,56 @@ fn generates_resumes_and_repeats_byte_for_byte() {
             .to_string_lossy()
             .ends_with(".tmp"))
     );
+    // A killed run's temporary file is removed by the next run.
+    let stale = a.path().join(".episode-killed.mcap.tmp");
+    std::fs::write(&stale, b"partial").unwrap();
+    generate(&task, a.path(), &cfg, &|_| {}).unwrap();
+    assert!(!stale.exists());
+    // Another seed into the same directory: refused, naming what differs, nothing touched.
+    let other = GenerateConfig {
+        seed: 5,
+        ..cfg.clone()
+    };
+    let e = generate(&task, a.path(), &other, &|_| {}).unwrap_err();
+    assert!(matches!(e, sim::generate::GenerateError::Argument(_)));
+    let m = e.to_string();
+    assert!(m.contains("seed 7 → 5") && m.contains("--force"), "{m}");
+    assert_eq!(std::fs::read(episode_path(a.path(), 1)).unwrap(), bytes1);
+    // The same from a directory written before generation.json: its first episode tells.
+    std::fs::remove_file(a.path().join(sim::generate::GENERATION_JSON)).unwrap();
+    let m = generate(&task, a.path(), &other, &|_| {})
+        .unwrap_err()
+        .to_string();
+    assert!(
+        m.contains("episode 0's seed") && m.contains("seed 5"),
+        "{m}"
+    );
+    // --force replaces the episodes: the directory equals a fresh seed-5 one.
+    let forced = GenerateConfig {
+        force: true,
+        ..other.clone()
+    };
+    generate(&task, a.path(), &forced, &|_| {}).unwrap();
+    let c = tempfile::tempdir().unwrap();
+    generate(&task, c.path(), &other, &|_| {}).unwrap();
+    for k in 0..3 {
+        assert_eq!(
+            std::fs::read(episode_path(a.path(), k)).unwrap(),
+            std::fs::read(episode_path(c.path(), k)).unwrap()
+        );
+    }
+    // More episodes with the same parameters is fine (episode k does not depend on the total).
+    let more = GenerateConfig {
+        episodes: 4,
+        ..other
+    };
+    assert_eq!(
+        generate(&task, c.path(), &more, &|_| {})
+            .unwrap()
+            .episodes
+            .len(),
+        4
+    );
     // Bad arguments.
     let e = generate(&task, a.path(), &GenerateConfig { val: 3, ..cfg }, &|_| {}).unwrap_err();
     assert!(e.to_string().contains("val < episodes"), "{e}");

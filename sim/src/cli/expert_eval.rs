@@ -153,7 +153,8 @@ pub fn run(
         }
         s.push_str(&format!("\nThroughput: {thr}.\n\n"));
         s.push_str(sim::expert::NOTES);
-        std::fs::write(&md, s).with_context(|| format!("writing {}", md.display()))?;
+        data::fsio::write_atomic(&md, s.as_bytes())
+            .with_context(|| format!("writing {}", md.display()))?;
     }
     Ok(())
 }

@@ -95,6 +95,10 @@ pub enum Command {
         /// once the goal is done (by default the recording ends 10 steps after the goal).
         #[arg(long)]
         hold_steps: Option<usize>,
+        /// Replace the episodes of an --out generated with other parameters (seed, task, image
+        /// size, expert settings; recorded in its generation.json) instead of refusing.
+        #[arg(long)]
+        force: bool,
     },
     /// Render the agentview of every shipped task at one seed into a labelled contact sheet.
     Sheet {
@@ -275,6 +279,7 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
             size,
             plain_expert,
             hold_steps,
+            force,
         } => generate::run(
             task,
             out,
@@ -285,6 +290,7 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
                 workers,
                 image_size: size,
                 expert: sim::generate::expert_config(plain_expert, hold_steps),
+                force,
                 ..Default::default()
             },
         ),

@@ -46,6 +46,149 @@ pub enum GenerateError {
     Argument(String),
 }
 
+/// The file in a generated dataset directory that records how its episodes were made.
+pub const GENERATION_JSON: &str = "generation.json";
+/// Format tag of [`GENERATION_JSON`].
+pub const GENERATION_FORMAT: &str = "libero-mem-rs/generation/1";
+
+/// `generation.json`: what makes a dataset's episodes what they are (the episode and validation
+/// counts may grow: episode `k` is the same file whatever the total).
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct GenerationRecord {
+    /// [`GENERATION_FORMAT`].
+    pub format: String,
+    /// Task id.
+    pub task: String,
+    /// Base seed.
+    pub seed: u64,
+    /// Camera image side.
+    pub image_size: usize,
+    /// The expert's action noise.
+    pub action_noise: f64,
+    /// The expert's seeded variation.
+    pub variation: bool,
+    /// The expert's idle steps after the goal.
+    pub hold_steps: usize,
+    /// Camera compression (`png` or `jpeg:Q`).
+    pub image_compression: String,
+    /// Chunk size and zstd level of the episode files.
+    pub chunk_size: u64,
+    /// zstd level.
+    pub zstd_level: u32,
+}
+
+impl GenerationRecord {
+    /// The record of generating `task` with `cfg`.
+    pub fn of(task: &TaskSpec, cfg: &GenerateConfig) -> Self {
+        GenerationRecord {
+            format: GENERATION_FORMAT.into(),
+            task: task.id.clone(),
+            seed: cfg.seed,
+            image_size: cfg.image_size,
+            action_noise: cfg.expert.action_noise,
+            variation: cfg.expert.variation,
+            hold_steps: cfg.expert.hold_steps,
+            image_compression: match cfg.writer.image_compression {
+                data::ImageCompression::Png => "png".into(),
+                data::ImageCompression::Jpeg { quality } => format!("jpeg:{quality}"),
+            },
+            chunk_size: cfg.writer.chunk_size,
+            zstd_level: cfg.writer.zstd_level,
+        }
+    }
+
+    /// The fields in which `self` (the directory's) differs from `want`, as `key a → b`.
+    fn differences(&self, want: &Self) -> Vec<String> {
+        let (a, b) = (
+            serde_json::to_value(self).expect("serialises"),
+            serde_json::to_value(want).expect("serialises"),
+        );
+        let (a, b) = (
+            a.as_object().expect("object"),
+            b.as_object().expect("object"),
+        );
+        a.iter()
+            .filter(|(k, v)| b.get(*k) != Some(v))
+            .map(|(k, v)| format!("{k} {v} → {}", b[k]))
+            .collect()
+    }
+}
+
+/// Removes what a killed generation left in `dir`: the recorder's `.episode-*.mcap.tmp` files.
+pub fn clean_temporaries(dir: &Path) -> Result<(), GenerateError> {
+    for e in std::fs::read_dir(dir).map_err(|e| data::DataError::io(dir, e))? {
+        let e = e.map_err(|e| data::DataError::io(dir, e))?;
+        let name = e.file_name().to_string_lossy().into_owned();
+        if name.starts_with(".episode-") && name.ends_with(".mcap.tmp") {
+            std::fs::remove_file(e.path()).map_err(|err| data::DataError::io(&e.path(), err))?;
+        }
+    }
+    Ok(())
+}
+
+/// Makes sure `dir` holds (or will hold) episodes of `want` only. A directory recorded with other
+/// parameters is refused, unless `force`, which removes its episodes and index first. A directory
+/// from before these records is checked on its first episode's task and seed.
+fn claim_dir(dir: &Path, want: &GenerationRecord, force: bool) -> Result<(), GenerateError> {
+    let path = dir.join(GENERATION_JSON);
+    let mismatch = if path.exists() {
+        let text = std::fs::read_to_string(&path).map_err(|e| data::DataError::io(&path, e))?;
+        let have: GenerationRecord = serde_json::from_str(&text).map_err(|e| {
+            GenerateError::Argument(format!("{}: not a generation record: {e}", path.display()))
+        })?;
+        have.differences(want)
+    } else {
+        let first = episode_path(dir, 0);
+        match first.exists().then(|| data::EpisodeReader::open(&first)) {
+            Some(Ok(r)) => {
+                let meta = r.meta();
+                let seeds: Vec<u64> = (0..MAX_ATTEMPTS)
+                    .map(|a| attempt_seed(want.seed, 0, a))
+                    .collect();
+                let mut d = vec![];
+                if meta.task_id != want.task {
+                    d.push(format!("task \"{}\" → \"{}\"", meta.task_id, want.task));
+                }
+                if !seeds.contains(&meta.seed) {
+                    d.push(format!(
+                        "episode 0's seed {} is not one of seed {}'s",
+                        meta.seed, want.seed
+                    ));
+                }
+                d
+            }
+            // An unreadable first episode is redone like any other (it is not trusted).
+            Some(Err(_)) | None => vec![],
+        }
+    };
+    if !mismatch.is_empty() {
+        if !force {
+            return Err(GenerateError::Argument(format!(
+                "{}: holds episodes generated with other parameters ({}); pass --force to replace \
+                 them, or generate into another directory",
+                dir.display(),
+                mismatch.join(", ")
+            )));
+        }
+        for e in std::fs::read_dir(dir).map_err(|e| data::DataError::io(dir, e))? {
+            let p = e.map_err(|e| data::DataError::io(dir, e))?.path();
+            let name = p
+                .file_name()
+                .map(|n| n.to_string_lossy().into_owned())
+                .unwrap_or_default();
+            if (name.starts_with("episode_") && name.ends_with(".mcap"))
+                || name == data::index::INDEX_FILE
+            {
+                std::fs::remove_file(&p).map_err(|e| data::DataError::io(&p, e))?;
+            }
+        }
+    }
+    let text = serde_json::to_string_pretty(want).expect("serialises");
+    data::index::write_atomic(&path, text.as_bytes())?;
+    Ok(())
+}
+
 /// What to generate.
 #[derive(Debug, Clone)]
 pub struct GenerateConfig {
@@ -64,6 +207,8 @@ pub struct GenerateConfig {
     /// The expert's settings (default: seeded variation and action noise on; with both off,
     /// one deterministic demonstration per start state — unimodal targets for imitation).
     pub expert: crate::expert::ExpertConfig,
+    /// Replace the episodes of a directory generated with other parameters (else an error).
+    pub force: bool,
 }
 
 impl Default for GenerateConfig {
@@ -76,6 +221,7 @@ impl Default for GenerateConfig {
             image_size: 128,
             writer: data::WriterOptions::default(),
             expert: crate::expert::ExpertConfig::default(),
+            force: false,
         }
     }
 }
@@ -189,6 +335,8 @@ pub fn generate(
         )));
     }
     std::fs::create_dir_all(dir).map_err(|e| data::DataError::io(dir, e))?;
+    clean_temporaries(dir)?;
+    claim_dir(dir, &GenerationRecord::of(task, cfg), cfg.force)?;
     let progress = Mutex::new(GenerateProgress::default());
     let report = |f: &dyn Fn(&mut GenerateProgress)| {
         let mut p = progress.lock().unwrap_or_else(|e| e.into_inner());
