@@ -71,6 +71,7 @@ impl data::exit::BadInput for EvalError {
             | EvalError::Results { .. }
             | EvalError::Input { .. } => true,
             EvalError::Data(d) => d.is_bad_input(),
+            EvalError::Env(e) => e.is_bad_input(),
             _ => false,
         }
     }

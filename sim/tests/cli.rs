@@ -306,3 +306,56 @@ fn a_goal_nested_10000_deep_is_exit_2_not_a_stack_overflow() {
     assert!(err.contains("nested deeper than 64 levels"), "{err}");
     assert!(!tmp("deep.png").exists());
 }
+
+#[test]
+fn task_file_faults_are_exit_2_naming_the_file_in_render_and_generate() {
+    let t1 = std::fs::read_to_string(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/tasks/libero_mem/t1.bddl"
+    ))
+    .unwrap();
+    let unknown = tmp("saucer.bddl");
+    std::fs::write(
+        &unknown,
+        t1.replace(
+            "akita_black_bowl_1 - akita_black_bowl",
+            "akita_black_bowl_1 - flying_saucer",
+        ),
+    )
+    .unwrap();
+    let inverted = tmp("inverted.bddl");
+    std::fs::write(
+        &inverted,
+        t1.replace("(-0.25 -0.15 0.12 -0.01)", "(0.12 -0.15 -0.25 -0.01)"),
+    )
+    .unwrap();
+    for (file, want) in [
+        (&unknown, "unknown object category 'flying_saucer'"),
+        (&inverted, "inverted rectangle"),
+    ] {
+        let f = file.to_str().unwrap();
+        let png = tmp("x.png");
+        let out = tmp("gen");
+        for args in [
+            vec!["render", "--task", f, "--out", png.to_str().unwrap()],
+            vec![
+                "generate",
+                "--task",
+                f,
+                "--out",
+                out.to_str().unwrap(),
+                "--episodes",
+                "2",
+                "--val",
+                "1",
+                "--size",
+                "16",
+            ],
+        ] {
+            let (code, _, err) = sim(&args);
+            assert_eq!(code, 2, "{args:?}: {err}");
+            assert!(err.contains(f) && err.contains(want), "{args:?}: {err}");
+            assert_eq!(err.lines().count(), 1, "{err}");
+        }
+    }
+}

@@ -276,7 +276,45 @@ fn shipped_files_use_only_known_constructs() {
                 .all(|a| ["on", "in", "open", "turnon"].contains(&a.predicate.as_str()))
         );
         assert!(!p.regions.is_empty() && !p.init.is_empty(), "{}", t.id);
+        bddl::check_scene(&t.id, p).unwrap();
     }
+}
+
+#[test]
+fn scene_checks_name_the_file_and_region() {
+    let t1 = include_str!("../tasks/libero_mem/t1.bddl");
+    // Region plate_1_region's rectangle with x_min and x_max swapped.
+    let start = t1.find("(plate_1_region").unwrap();
+    let rect = "(-0.25 -0.15 0.12 -0.01)";
+    assert_eq!(t1.matches(rect).count(), 1);
+    let text = t1.replace(rect, "(0.12 -0.15 -0.25 -0.01)");
+    let p = bddl::parse_named("inv.bddl", &text).unwrap();
+    let e = bddl::check_scene("inv.bddl", &p).unwrap_err();
+    let line = t1[..start].matches('\n').count() as u32 + 1;
+    assert_eq!(e.line, line, "{e}");
+    assert!(
+        e.to_string().starts_with(&format!("inv.bddl:{line}:")),
+        "{e}"
+    );
+    assert!(
+        e.message
+            .contains("region `plate_1_region`: inverted rectangle"),
+        "{e}"
+    );
+    // No fixtures section: the fixtures declared as objects instead.
+    let head = "(:fixtures\n    kitchen_table - kitchen_table\n    wooden_cabinet_1 - wooden_cabinet\n  )\n\n  (:objects\n";
+    assert_eq!(t1.matches(head).count(), 1);
+    let text = t1.replace(
+        head,
+        "(:objects\n    kitchen_table - kitchen_table\n    wooden_cabinet_1 - wooden_cabinet\n",
+    );
+    let p = bddl::parse_named("nofix.bddl", &text).unwrap();
+    let e = bddl::check_scene("nofix.bddl", &p).unwrap_err();
+    assert!(
+        e.to_string()
+            .starts_with("nofix.bddl:1:1: no `(:fixtures ...)` section"),
+        "{e}"
+    );
 }
 
 // ---------------------------------------------------------------------------------------------

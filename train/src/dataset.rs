@@ -104,6 +104,7 @@ pub fn generate_dataset(spec: &GenerateSpec, dir: &Path, progress: bool) -> Resu
     let index = generated.map_err(|e| match e {
         sim::generate::GenerateError::Argument(m) => bad(m),
         sim::generate::GenerateError::Data(d) => TrainError::Data(d),
+        e if e.is_bad_input() => bad(e.to_string()),
         other => TrainError::Other(format!("generating {}: {other}", dir.display())),
     })?;
     bar.finish_and_clear();

@@ -38,6 +38,7 @@ pub fn run(task: String, out: PathBuf, cfg: sim::generate::GenerateConfig) -> an
         })
         .map_err(|e| match e {
             sim::generate::GenerateError::Argument(m) => anyhow::Error::new(BadInput(m)),
+            e if e.is_bad_input() => anyhow::Error::new(BadInput(e.to_string())),
             other => other.into(),
         })?;
         bar.finish_and_clear();

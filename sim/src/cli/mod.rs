@@ -238,17 +238,10 @@ impl data::exit::BadInput for BadInput {
 
 /// Bad input (unknown camera, bad size, unknown task or category, bad MJCF) → [`BadInput`].
 pub fn classify(e: EnvError) -> anyhow::Error {
-    match e {
-        EnvError::Render(r @ (RenderError::UnknownCamera { .. } | RenderError::BadSize { .. })) => {
-            BadInput(r.to_string()).into()
-        }
-        EnvError::Config(_) | EnvError::Action(_) => BadInput(e.to_string()).into(),
-        EnvError::Mujoco(m @ MjError::Load { .. }) => BadInput(m.to_string()).into(),
-        EnvError::Task(t) => BadInput(t.to_string()).into(),
-        EnvError::Scene(s @ sim::scene::SceneError::UnknownCategory { .. }) => {
-            BadInput(s.to_string()).into()
-        }
-        other => other.into(),
+    if e.is_bad_input() {
+        BadInput(e.to_string()).into()
+    } else {
+        e.into()
     }
 }
 

@@ -189,6 +189,19 @@ fn claim_dir(dir: &Path, want: &GenerationRecord, force: bool) -> Result<(), Gen
     Ok(())
 }
 
+impl GenerateError {
+    /// True when the input (arguments, the task file, the output directory's contents) is at
+    /// fault: the workspace's exit code 2.
+    pub fn is_bad_input(&self) -> bool {
+        match self {
+            GenerateError::Env(e) => e.is_bad_input(),
+            GenerateError::Data(d) => d.is_bad_input(),
+            GenerateError::Argument(_) => true,
+            GenerateError::Record(_) | GenerateError::Expert { .. } => false,
+        }
+    }
+}
+
 /// What to generate.
 #[derive(Debug, Clone)]
 pub struct GenerateConfig {
@@ -286,7 +299,14 @@ pub fn record_episode(
     writer: data::WriterOptions,
     expert: &crate::expert::ExpertConfig,
 ) -> Result<bool, GenerateError> {
-    let mut obs = env.reset(seed)?;
+    // A start the scene cannot place is the task file's fault: say which task.
+    let mut obs = env.reset(seed).map_err(|e| match e {
+        crate::world::env::EnvError::Scene(source) => crate::world::env::EnvError::TaskScene {
+            task: task.id.clone(),
+            source,
+        },
+        other => other,
+    })?;
     let expert_hold = expert.hold_steps;
     let mut expert = Expert::with_config(task, seed, expert.clone());
     let mut rec = Recorder::create(path, env, task, seed, writer)?;

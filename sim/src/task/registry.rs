@@ -540,6 +540,7 @@ pub(crate) fn read_bddl(path: &Path) -> Result<(String, Problem), TaskError> {
         source,
     })?;
     let problem = bddl::parse_named(&name, &text)?;
+    bddl::check_scene(&name, &problem)?;
     Ok((text, problem))
 }
 

@@ -53,6 +53,33 @@ pub enum EnvError {
     /// The task could not be resolved or parsed.
     #[error(transparent)]
     Task(#[from] crate::task::TaskError),
+    /// The scene of a task (its id: a `.bddl` path for a user's file) could not be built.
+    #[error("task `{task}`: {source}")]
+    TaskScene {
+        /// The task id.
+        task: String,
+        /// Why.
+        #[source]
+        source: SceneError,
+    },
+}
+
+impl EnvError {
+    /// True when the input (a task file, the config, an action) is at fault rather than the
+    /// simulator or the machine: the workspace's exit code 2.
+    pub fn is_bad_input(&self) -> bool {
+        match self {
+            EnvError::Config(_) | EnvError::Action(_) | EnvError::Task(_) => true,
+            EnvError::Render(r) => matches!(
+                r,
+                RenderError::UnknownCamera { .. } | RenderError::BadSize { .. }
+            ),
+            EnvError::Mujoco(m) => matches!(m, MjError::Load { .. }),
+            EnvError::Scene(s) | EnvError::TaskScene { source: s, .. } => {
+                !matches!(s, SceneError::Mujoco(_))
+            }
+        }
+    }
 }
 
 /// Environment settings.
@@ -271,9 +298,14 @@ impl Env {
                 Some(p)
             }
         };
-        let scene = Scene::build_with(SceneSpec::from_problem(&task.problem), pack.as_ref())?;
+        let in_task = |source: SceneError| EnvError::TaskScene {
+            task: task.id.clone(),
+            source,
+        };
+        let scene = Scene::build_with(SceneSpec::from_problem(&task.problem), pack.as_ref())
+            .map_err(in_task)?;
         for a in task.problem.init.iter().chain(task.problem.goal.atoms()) {
-            scene.check_atom(a.predicate, &a.args)?;
+            scene.check_atom(a.predicate, &a.args).map_err(in_task)?;
         }
         let tracker = task.tracker();
         let model = scene.model.clone();

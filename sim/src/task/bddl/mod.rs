@@ -51,3 +51,34 @@ pub fn parse_named(file: &str, text: &str) -> Result<Problem, BddlError> {
     let root = lex::read_tree(text).map_err(|e| e.in_file(file))?;
     parse::problem(&root).map_err(|e| e.in_file(file))
 }
+
+/// What a scene needs beyond the syntax, checked before a task file is used: a `(:fixtures ...)`
+/// section (the workspace lives there in every LIBERO file) and placement rectangles with
+/// `x_min ≤ x_max` and `y_min ≤ y_max` (an inverted one has no point to sample). Errors name the
+/// file and the region's line.
+pub fn check_scene(file: &str, p: &Problem) -> Result<(), BddlError> {
+    if p.fixtures.is_empty() {
+        return Err(BddlError::at(
+            Span { line: 1, col: 1 },
+            "no `(:fixtures ...)` section: a scene needs its workspace fixture (for example \
+             `(:fixtures main_table - table)`)",
+        )
+        .in_file(file));
+    }
+    for r in &p.regions {
+        for &[x0, y0, x1, y1] in &r.ranges {
+            if x0 > x1 || y0 > y1 {
+                return Err(BddlError::at(
+                    r.span,
+                    format!(
+                        "region `{}`: inverted rectangle ({x0} {y0} {x1} {y1}); expected \
+                         (x_min y_min x_max y_max) with x_min ≤ x_max and y_min ≤ y_max",
+                        r.name
+                    ),
+                )
+                .in_file(file));
+            }
+        }
+    }
+    Ok(())
+}
