@@ -15,8 +15,6 @@ use std::path::PathBuf;
 
 use clap::{Parser, Subcommand, ValueEnum};
 use sim::env::EnvError;
-use sim::mujoco::MjError;
-use sim::render::RenderError;
 
 #[derive(Parser)]
 #[command(
