@@ -749,6 +749,44 @@ mod tests {
         // A record of another architecture does not load either.
         let other_cfg = micro("dense");
         assert!(PolicyModel::load(&other_cfg, &path, &device).is_err());
+        // Fuzzing the loader: damaged copies (bytes flipped, the file cut) load or fail, and
+        // never panic. The run contract's manifest refuses them before this point; the loader
+        // itself must still be safe on any bytes.
+        let good = std::fs::read(&path).unwrap();
+        let mut rng = 0x9e37_79b9_7f4a_7c15u64;
+        let mut next = || {
+            rng ^= rng << 13;
+            rng ^= rng >> 7;
+            rng ^= rng << 17;
+            rng
+        };
+        let bad = dir.join("bad.bpk");
+        let (mut loaded_ok, mut refused) = (0, 0);
+        for case in 0..200 {
+            let mut b = good.clone();
+            if case % 4 == 0 {
+                b.truncate(next() as usize % b.len());
+            } else {
+                for _ in 0..1 + case % 8 {
+                    let i = next() as usize % b.len();
+                    b[i] ^= 1 << (next() % 8);
+                }
+            }
+            std::fs::write(&bad, &b).unwrap();
+            let r = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+                PolicyModel::load(&cfg, &bad, &device).is_ok()
+            }));
+            match r {
+                Ok(true) => loaded_ok += 1,
+                Ok(false) => refused += 1,
+                Err(_) => panic!("case {case}: the loader panicked on a damaged file"),
+            }
+        }
+        assert_eq!(loaded_ok + refused, 200);
+        assert!(
+            refused >= 50,
+            "every cut file is refused ({refused} refused)"
+        );
         std::fs::remove_dir_all(&dir).ok();
     }
 

@@ -660,6 +660,47 @@ variant = "e_slotssm"
 }
 
 #[cfg(test)]
+mod fuzz {
+    use super::*;
+    use proptest::prelude::*;
+
+    const SEEDS: [&str; 3] = [
+        include_str!("../../configs/state/t1.toml"),
+        include_str!("../../configs/t3.toml"),
+        include_str!("../../configs/libero_goal.toml"),
+    ];
+
+    proptest! {
+        #![proptest_config(ProptestConfig::with_cases(1000))]
+        /// Fuzzing the config loader: shipped configs with characters replaced, lines cut or
+        /// duplicated, and numbers swapped for extreme ones, load or give an error message, never
+        /// a panic.
+        #[test]
+        fn damaged_configs_load_or_say_why(
+            seed in 0usize..3,
+            edits in proptest::collection::vec((any::<usize>(), 0u8..4, 0usize..12), 1..5),
+        ) {
+            let mut text = SEEDS[seed].to_string();
+            const BITS: [&str; 12] = ["=", "[", "]", "\"", "\n", "0", "-1", "nan", "inf", "1e308", "18446744073709551615", "{"];
+            for (at, kind, v) in edits {
+                let mut i = at % text.len().max(1);
+                while !text.is_char_boundary(i) { i -= 1; }
+                match kind {
+                    0 => text.insert_str(i, BITS[v]),
+                    1 => text.truncate(i),
+                    2 => { let j = text[i..].find('\n').map_or(text.len(), |j| i + j); text.replace_range(i..j, BITS[v]) }
+                    _ => { let line = text[i..].lines().next().unwrap_or("").to_string(); text.insert_str(i, &line) }
+                }
+            }
+            match Config::parse(&text) {
+                Ok(c) => { c.model_config(vec![]).map_err(TestCaseError::fail)?; }
+                Err(e) => prop_assert!(!e.is_empty()),
+            }
+        }
+    }
+}
+
+#[cfg(test)]
 mod shipped {
     use super::*;
 

@@ -487,7 +487,9 @@ pub fn parse_array(b: &[u8]) -> Result<(usize, usize, Vec<f64>), (usize, String)
         return Err((at, format!("array of shape {shape:?}, expected 2-D")));
     }
     let (rows, cols) = (shape[0], shape[1]);
-    if data.len() != rows * cols * 8 {
+    // Checked: a damaged file can claim any shape.
+    let bytes = rows.checked_mul(cols).and_then(|n| n.checked_mul(8));
+    if bytes != Some(data.len()) {
         return Err((at, format!("{} data bytes for shape {shape:?}", data.len())));
     }
     let vals: Vec<f64> = data
@@ -574,6 +576,62 @@ mod tests {
         );
         let e = parse_array(b"\x80\x02cos\nsystem\n").unwrap_err();
         assert_eq!(e.0, 2);
+    }
+
+    proptest::proptest! {
+        #![proptest_config(proptest::prelude::ProptestConfig::with_cases(2000))]
+        /// Fuzzing the reader: a real numpy pickle with bytes replaced, cut or duplicated, and
+        /// arbitrary bytes, give an array or an error at an offset inside the input, never a
+        /// panic (overflow checks are on in tests) and never an allocation the input cannot fill.
+        #[test]
+        fn damaged_pickles_never_panic(
+            edits in proptest::collection::vec((0usize..4096, 0u8..3, proptest::prelude::any::<u8>()), 1..6),
+        ) {
+            let mut b = numpy_pickle(3, 4, &[0.5; 12]);
+            for (at, kind, v) in edits {
+                let i = at % b.len().max(1);
+                match kind {
+                    0 => if i < b.len() { b[i] = v },
+                    1 => b.truncate(i),
+                    _ => { let tail = b[i..].to_vec(); b.extend_from_slice(&tail[..tail.len().min(32)]) }
+                }
+            }
+            check(&b)?;
+        }
+
+        #[test]
+        fn arbitrary_bytes_never_panic(b in proptest::collection::vec(proptest::prelude::any::<u8>(), 0..256)) {
+            check(&b)?;
+        }
+    }
+
+    fn check(b: &[u8]) -> Result<(), proptest::test_runner::TestCaseError> {
+        match parse_array(b) {
+            Ok((r, c, v)) => proptest::prop_assert_eq!(r * c, v.len()),
+            Err((offset, msg)) => {
+                proptest::prop_assert!(
+                    offset <= b.len(),
+                    "offset {} of {}: {}",
+                    offset,
+                    b.len(),
+                    msg
+                )
+            }
+        }
+        Ok(())
+    }
+
+    #[test]
+    fn a_huge_claimed_shape_is_an_error_not_an_allocation() {
+        let mut p = numpy_pickle(3, 4, &[0.5; 12]);
+        // The shape's two small ints (`K 3`, `K 4`) become 4-byte ints of 2^31 - 1 each.
+        let at = p.windows(4).position(|w| w == [b'K', 3, b'K', 4]).unwrap();
+        p.splice(
+            at..at + 4,
+            [b'J', 0xff, 0xff, 0xff, 0x7f, b'J', 0xff, 0xff, 0xff, 0x7f],
+        );
+        let e = parse_array(&p).unwrap_err();
+        assert!(e.0 <= p.len(), "{e:?}");
     }
 
     #[test]
