@@ -37,35 +37,6 @@ fn opts(run_dir: &Path) -> TrainOptions {
     }
 }
 
-/// Every float parameter of the final checkpoint of a run, in visiting order.
-fn final_weights(run_dir: &Path) -> Vec<Vec<f32>> {
-    struct Collect(Vec<Vec<f32>>);
-    impl ModuleVisitor for Collect {
-        fn visit_float<const D: usize>(&mut self, p: &Param<Tensor<D>>) {
-            self.0
-                .push(p.val().into_data().try_to_vec::<f32>().unwrap());
-        }
-    }
-    let cfg: ModelConfig =
-        serde_json::from_str(&std::fs::read_to_string(run_dir.join("model.json")).unwrap())
-            .unwrap();
-    let latest = std::fs::read_to_string(run_dir.join("checkpoints/latest")).unwrap();
-    let path = run_dir
-        .join("checkpoints")
-        .join(latest.trim())
-        .join("model.bpk");
-    let model = PolicyModel::load(&cfg, path, &Device::flex()).unwrap();
-    let mut c = Collect(vec![]);
-    model.visit(&mut c);
-    c.0
-}
-
-fn bits(w: &[Vec<f32>]) -> Vec<Vec<u32>> {
-    w.iter()
-        .map(|t| t.iter().map(|x| x.to_bits()).collect())
-        .collect()
-}
-
 fn write_config(dir: &Path, cfg: &train::Config) -> PathBuf {
     let p = dir.join("exp.toml");
     std::fs::write(&p, cfg.to_toml()).unwrap();
@@ -195,8 +166,8 @@ fn stop_and_resume(sampling: train::config::Sampling) {
     assert_eq!((s.start_step, s.step), (6, 12));
     assert!(!ck.join(".tmp-killed").exists());
     assert_eq!(
-        bits(&final_weights(a.path())),
-        bits(&final_weights(b.path())),
+        common::bits(&common::final_weights(a.path())),
+        common::bits(&common::final_weights(b.path())),
         "{sampling:?}: resumed run differs from the uninterrupted one"
     );
     let steps: Vec<u64> = metrics::read(&b.path().join("metrics.jsonl"))
@@ -209,8 +180,8 @@ fn stop_and_resume(sampling: train::config::Sampling) {
     let c = tempfile::tempdir().unwrap();
     train::train(&cfg, &opts(c.path())).unwrap();
     assert_eq!(
-        bits(&final_weights(a.path())),
-        bits(&final_weights(c.path()))
+        common::bits(&common::final_weights(a.path())),
+        common::bits(&common::final_weights(c.path()))
     );
 }
 
@@ -260,7 +231,10 @@ fn kill_9_mid_run_then_resume_matches_uninterrupted_binary_run() {
         "{}",
         String::from_utf8_lossy(&out.stderr)
     );
-    assert_eq!(bits(&final_weights(&a)), bits(&final_weights(&b)));
+    assert_eq!(
+        common::bits(&common::final_weights(&a)),
+        common::bits(&common::final_weights(&b))
+    );
 }
 
 #[test]
@@ -416,8 +390,8 @@ fn corrupt_newest_checkpoint_is_skipped_by_resume_and_by_the_evaluator_alike() {
     assert_eq!((s.start_step, s.step), (4, 8));
     // Redoing steps 5..8 from step 4 gives the uninterrupted run's weights.
     assert_eq!(
-        bits(&final_weights(a.path())),
-        bits(&final_weights(b.path()))
+        common::bits(&common::final_weights(a.path())),
+        common::bits(&common::final_weights(b.path()))
     );
     // A step dir left empty by a kill is removed, not kept past pruning.
     std::fs::create_dir_all(ck.join("step_000000025")).unwrap();
@@ -618,8 +592,8 @@ losses = ["action", "contrastive", "window", "slot_recon"]
     let s = train::train(&cfg, &opts(b.path())).unwrap();
     assert_eq!((s.start_step, s.step), (3, 8));
     assert_eq!(
-        bits(&final_weights(a.path())),
-        bits(&final_weights(b.path()))
+        common::bits(&common::final_weights(a.path())),
+        common::bits(&common::final_weights(b.path()))
     );
 }
 

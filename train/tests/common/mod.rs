@@ -51,3 +51,38 @@ pub fn tiny_config(data_dir: &Path) -> train::Config {
     cfg.data.generate = None;
     cfg
 }
+
+/// Every float parameter of the final checkpoint of a run (the one `latest` names), in visiting
+/// order: weights compared by content (the weight files hold random parameter ids besides).
+#[allow(dead_code)] // not every test binary compares weights
+pub fn final_weights(run_dir: &Path) -> Vec<Vec<f32>> {
+    use burn::module::{Module, ModuleVisitor, Param};
+    use burn::prelude::*;
+    struct Collect(Vec<Vec<f32>>);
+    impl ModuleVisitor for Collect {
+        fn visit_float<const D: usize>(&mut self, p: &Param<Tensor<D>>) {
+            self.0
+                .push(p.val().into_data().try_to_vec::<f32>().unwrap());
+        }
+    }
+    let cfg: model::ModelConfig =
+        serde_json::from_str(&std::fs::read_to_string(run_dir.join("model.json")).unwrap())
+            .unwrap();
+    let latest = std::fs::read_to_string(run_dir.join("checkpoints/latest")).unwrap();
+    let path = run_dir
+        .join("checkpoints")
+        .join(latest.trim())
+        .join("model.bpk");
+    let model = model::PolicyModel::load(&cfg, path, &Device::flex()).unwrap();
+    let mut c = Collect(vec![]);
+    model.visit(&mut c);
+    c.0
+}
+
+/// The bit patterns of [`final_weights`]' floats (equal bits: equal weights, NaN included).
+#[allow(dead_code)]
+pub fn bits(w: &[Vec<f32>]) -> Vec<Vec<u32>> {
+    w.iter()
+        .map(|t| t.iter().map(|x| x.to_bits()).collect())
+        .collect()
+}
