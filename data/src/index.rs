@@ -60,9 +60,16 @@ impl EpisodeEntry {
     /// then the mcap structure and the step count. A mismatch is bad input naming the file.
     pub fn open(&self, dir: &Path) -> Result<EpisodeReader> {
         let path = dir.join(&self.file);
-        let bytes: std::sync::Arc<[u8]> = std::fs::read(&path)
-            .map_err(|e| DataError::io(&path, e))?
-            .into();
+        let bytes: std::sync::Arc<[u8]> = match std::fs::read(&path) {
+            Ok(b) => b.into(),
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => {
+                return Err(DataError::invalid(
+                    &path,
+                    "listed in index.json but missing (rebuild the index with `data stats DIR`, or regenerate the episode)",
+                ));
+            }
+            Err(e) => return Err(DataError::io(&path, e)),
+        };
         let stale = "index.json was built from other files (rebuild it with `data stats DIR`, or regenerate the episode)";
         if let Some(n) = self.bytes
             && n != bytes.len() as u64

@@ -281,7 +281,8 @@ pub fn train(cfg: &Config, opts: &TrainOptions) -> Result<TrainSummary> {
                     "warning: skipping corrupt checkpoint {}: {e}",
                     dir.display()
                 );
-                last_err = Some(TrainError::from(e));
+                // The newest one's error is the one reported when none is usable (as eval does).
+                last_err.get_or_insert(TrainError::from(e));
                 continue;
             }
         }
@@ -301,7 +302,7 @@ pub fn train(cfg: &Config, opts: &TrainOptions) -> Result<TrainSummary> {
                     "warning: skipping unreadable checkpoint {}: {e}",
                     dir.display()
                 );
-                last_err = Some(e);
+                last_err.get_or_insert(e);
             }
         }
     }
