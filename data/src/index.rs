@@ -70,6 +70,11 @@ impl EpisodeEntry {
             }
             Err(e) => return Err(DataError::io(&path, e)),
         };
+        self.check_bytes(path, bytes)
+    }
+
+    /// The checks of [`EpisodeEntry::open`] on a file already read into memory.
+    pub fn check_bytes(&self, path: PathBuf, bytes: std::sync::Arc<[u8]>) -> Result<EpisodeReader> {
         let stale = "index.json was built from other files (rebuild it with `data stats DIR`, or regenerate the episode)";
         if let Some(n) = self.bytes
             && n != bytes.len() as u64

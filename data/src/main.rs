@@ -42,6 +42,15 @@ enum Cmd {
         #[arg(long, default_value_t = 0)]
         seed: u64,
     },
+    /// Check every episode of a dataset as training opens them (size and CRC-32 against
+    /// index.json, mcap structure, step count) and print what it cost.
+    Verify {
+        /// Dataset directory (with index.json).
+        dir: PathBuf,
+        /// Also decompress every chunk and check every message (CRCs, schemas), as `inspect --verify`.
+        #[arg(long)]
+        chunks: bool,
+    },
     /// Print a human summary of one episode file.
     Inspect {
         /// Episode file.
@@ -136,6 +145,54 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                     a.q01[d],
                     a.q99[d],
                     if a.mask[d] { "" } else { "(not normalised)" }
+                );
+            }
+        }
+        Cmd::Verify { dir, chunks } => {
+            let idx = data::DatasetIndex::load(&dir)?;
+            let (mut read_s, mut check_s, mut chunk_s, mut bytes) = (0.0, 0.0, 0.0, 0u64);
+            for e in &idx.episodes {
+                let path = dir.join(&e.file);
+                let t = std::time::Instant::now();
+                let b: std::sync::Arc<[u8]> = std::fs::read(&path)
+                    .map_err(|err| data::DataError::io(&path, err))?
+                    .into();
+                read_s += t.elapsed().as_secs_f64();
+                bytes += b.len() as u64;
+                let t = std::time::Instant::now();
+                let r = e.check_bytes(path, b)?;
+                check_s += t.elapsed().as_secs_f64();
+                if chunks {
+                    let t = std::time::Instant::now();
+                    r.verify()?;
+                    chunk_s += t.elapsed().as_secs_f64();
+                }
+            }
+            let gb = bytes as f64 / 1e9;
+            let legacy = idx.episodes.iter().filter(|e| e.crc32.is_none()).count();
+            data::outln!(
+                "{}: {} episodes, {:.3} GB verified; reading {:.0} ms, checking (size, CRC-32, mcap \
+                 structure, length) {:.0} ms = {:.0} ms/GB on one thread{}",
+                dir.display(),
+                idx.episodes.len(),
+                gb,
+                read_s * 1e3,
+                check_s * 1e3,
+                check_s * 1e3 / gb.max(1e-9),
+                if chunks {
+                    format!(
+                        ", every chunk decompressed and checked {:.0} ms = {:.0} ms/GB",
+                        chunk_s * 1e3,
+                        chunk_s * 1e3 / gb.max(1e-9)
+                    )
+                } else {
+                    String::new()
+                }
+            );
+            if legacy > 0 {
+                data::outln!(
+                    "  {legacy} episodes have no size and CRC-32 in index.json (written before the checks; \
+                     `data stats` records them)"
                 );
             }
         }
