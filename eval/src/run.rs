@@ -22,7 +22,9 @@ impl From<model::ModelError> for EvalError {
 /// Opens `dir` as [`RunDir::open`] does (the newest checkpoint that verifies, the trainer's rule)
 /// and says on stderr which checkpoint it uses and which newer ones it skipped, and why.
 pub fn open(dir: impl AsRef<Path>) -> Result<RunDir, EvalError> {
+    let t = std::time::Instant::now();
     let run = RunDir::open(dir)?;
+    let ms = t.elapsed().as_secs_f64() * 1e3;
     for (skipped, why) in &run.skipped {
         eprintln!(
             "warning: skipping corrupt checkpoint {}: {why}",
@@ -34,7 +36,7 @@ pub fn open(dir: impl AsRef<Path>) -> Result<RunDir, EvalError> {
         model::run::Verified::NoManifest => "no manifest (written before manifests): not verified",
     };
     eprintln!(
-        "checkpoint {} (step {}): {note}",
+        "checkpoint {} (step {}): {note} (run opened in {ms:.1} ms)",
         run.checkpoint.display(),
         run.step
     );
