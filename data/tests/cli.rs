@@ -35,7 +35,10 @@ fn synth_stats_inspect_and_bad_input_exit_codes() {
     // verify: every episode checked against the index; a damaged one is exit 2 naming it
     let out = data().arg("verify").arg(dir.path()).output().unwrap();
     let text = String::from_utf8_lossy(&out.stdout);
-    assert!(out.status.success() && text.contains("2 episodes"), "{text}");
+    assert!(
+        out.status.success() && text.contains("2 episodes"),
+        "{text}"
+    );
     let ep = dir.path().join("synth_000.mcap");
     let good = std::fs::read(&ep).unwrap();
     let mut bad = good.clone();
@@ -44,7 +47,10 @@ fn synth_stats_inspect_and_bad_input_exit_codes() {
     let out = data().arg("verify").arg(dir.path()).output().unwrap();
     let err = String::from_utf8_lossy(&out.stderr);
     assert_eq!(out.status.code(), Some(2), "{err}");
-    assert!(err.contains("synth_000.mcap") && err.contains("CRC-32"), "{err}");
+    assert!(
+        err.contains("synth_000.mcap") && err.contains("CRC-32"),
+        "{err}"
+    );
     std::fs::write(&ep, &good).unwrap();
     let out = data()
         .arg("inspect")

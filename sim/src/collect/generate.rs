@@ -121,7 +121,7 @@ pub fn clean_temporaries(dir: &Path) -> Result<(), GenerateError> {
         let e = e.map_err(|e| data::DataError::io(dir, e))?;
         let name = e.file_name().to_string_lossy().into_owned();
         if name.starts_with(".episode-") && name.ends_with(".mcap.tmp") {
-            std::fs::remove_file(e.path()).map_err(|err| data::DataError::io(&e.path(), err))?;
+            std::fs::remove_file(e.path()).map_err(|err| data::DataError::io(e.path(), err))?;
         }
     }
     Ok(())
