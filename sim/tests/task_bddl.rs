@@ -668,6 +668,10 @@ proptest! {
         let back = bddl::parse(&text).map_err(|e| TestCaseError::fail(format!("{e}\n{text}")))?;
         prop_assert_eq!(back, p);
     }
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(2000))]
 
     /// Fuzzing the parser: any text from BDDL's own characters, and any real file mutated (bytes
     /// replaced, cut, duplicated), gives a problem or an error with a position inside the text,
