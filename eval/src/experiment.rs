@@ -634,8 +634,8 @@ fn memory_claim(mode: &str, by_variant: &[(&str, Vec<&TaskSummary>)]) -> String 
          label) on every counting task.\n\n"
     );
     table_header(&mut s, "comparison", &measured);
-    // The claim's own margins (every measured task has both sides).
-    let mut holds = true;
+    // The claim's own margins (every measured task has both sides), per task.
+    let mut margins: Vec<f64> = vec![];
     for (i, (label, a, b)) in comparisons.into_iter().enumerate() {
         let cells: Vec<Option<(f64, f64)>> = measured
             .iter()
@@ -645,7 +645,7 @@ fn memory_claim(mode: &str, by_variant: &[(&str, Vec<&TaskSummary>)]) -> String 
             })
             .collect();
         if i == 0 {
-            holds = cells.iter().flatten().all(|(dc, _)| *dc >= CLAIM_MARGIN);
+            margins = cells.iter().flatten().map(|(dc, _)| *dc).collect();
         }
         if cells.iter().all(Option::is_none) {
             continue;
@@ -669,20 +669,37 @@ fn memory_claim(mode: &str, by_variant: &[(&str, Vec<&TaskSummary>)]) -> String 
         .filter(|t| !measured.contains(t))
         .map(report::short)
         .collect();
-    s.push_str(&format!(
-        "\nThe claim {} on {} ({}).",
-        if holds { "holds" } else { "does not hold" },
+    let tasks = |pass: bool| -> Vec<String> {
         measured
             .iter()
-            .map(|t| report::short(t))
-            .collect::<Vec<_>>()
-            .join(", "),
-        if holds {
-            format!("every margin ≥ {CLAIM_MARGIN:.0} points")
-        } else {
-            format!("a margin below {CLAIM_MARGIN:.0} points")
-        }
-    ));
+            .zip(&margins)
+            .filter(|(_, m)| (**m >= CLAIM_MARGIN) == pass)
+            .map(|(t, m)| {
+                if pass {
+                    report::short(t).to_string()
+                } else {
+                    format!("{} ({m:+.0})", report::short(t))
+                }
+            })
+            .collect()
+    };
+    let (pass, fail) = (tasks(true), tasks(false));
+    if fail.is_empty() {
+        s.push_str(&format!(
+            "\nThe claim holds on {} (every margin ≥ {CLAIM_MARGIN:.0} points).",
+            pass.join(", ")
+        ));
+    } else {
+        s.push_str(&format!(
+            "\nThe claim does not hold: the margin is below {CLAIM_MARGIN:.0} points on {}{}.",
+            fail.join(", "),
+            if pass.is_empty() {
+                String::new()
+            } else {
+                format!(" (it holds on {})", pass.join(", "))
+            }
+        ));
+    }
     if !missing.is_empty() {
         s.push_str(&format!(" Not measured on {}.", missing.join(", ")));
     }
@@ -915,7 +932,9 @@ mod tests {
         runs[2].tasks[1].completion = 25.0;
         let md = markdown(&x, &runs, &[]);
         assert!(
-            md.contains("The claim does not hold on t3, t5 (a margin below 30 points)."),
+            md.contains(
+                "The claim does not hold: the margin is below 30 points on t5 (+25) (it holds on t3)."
+            ),
             "{md}"
         );
         // Without slotvla_h1 there is no claim to measure.
