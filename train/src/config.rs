@@ -738,7 +738,16 @@ mod shipped {
         states.sort();
         assert_eq!(
             states,
-            ["libero_goal", "libero_mem", "t1", "t2", "t3", "t4", "t5", "tiny"]
+            [
+                "libero_goal",
+                "libero_mem",
+                "t1",
+                "t2",
+                "t3",
+                "t4",
+                "t5",
+                "tiny"
+            ]
         );
     }
 }
