@@ -1,6 +1,6 @@
 //! Files written so that a reader never sees half of one: the one atomic-write helper of the
 //! workspace (a synced temporary file in the same directory, then a rename), and PNG files
-//! through it.
+//! through it; and the one sha256 of a file (downloaded wheels, checkpoint manifests).
 
 use std::path::{Path, PathBuf};
 
@@ -38,6 +38,26 @@ pub fn set_readable(file: &std::fs::File, path: &Path) -> Result<()> {
     #[cfg(not(unix))]
     let _ = (file, path);
     Ok(())
+}
+
+/// Size in bytes and sha256 (lower-case hex) of the file at `path`, read in 1 MiB blocks.
+pub fn sha256_file(path: &Path) -> Result<(u64, String)> {
+    use sha2::Digest;
+    use std::io::Read;
+    let mut f = std::fs::File::open(path).map_err(|e| DataError::io(path, e))?;
+    let mut h = sha2::Sha256::new();
+    let mut buf = vec![0u8; 1 << 20];
+    let mut bytes = 0u64;
+    loop {
+        let n = f.read(&mut buf).map_err(|e| DataError::io(path, e))?;
+        if n == 0 {
+            break;
+        }
+        h.update(&buf[..n]);
+        bytes += n as u64;
+    }
+    let hex = h.finalize().iter().map(|b| format!("{b:02x}")).collect();
+    Ok((bytes, hex))
 }
 
 /// Encodes `img` as PNG and writes it atomically ([`write_atomic`]).

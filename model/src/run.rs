@@ -82,27 +82,12 @@ pub struct FileDigest {
     pub sha256: String,
 }
 
-/// Size and sha256 of the file at `path`, read in 1 MiB blocks.
+/// Size and sha256 of the file at `path` ([`data::fsio::sha256_file`]).
 pub fn digest(path: &Path) -> Result<FileDigest> {
-    use sha2::Digest;
-    use std::io::Read;
-    let mut f = fs::File::open(path).map_err(|e| io_error(path, e))?;
-    let mut hasher = sha2::Sha256::new();
-    let mut buf = vec![0u8; 1 << 20];
-    let mut bytes = 0u64;
-    loop {
-        let n = f.read(&mut buf).map_err(|e| io_error(path, e))?;
-        if n == 0 {
-            break;
-        }
-        hasher.update(&buf[..n]);
-        bytes += n as u64;
-    }
-    let sha256 = hasher
-        .finalize()
-        .iter()
-        .map(|b| format!("{b:02x}"))
-        .collect();
+    let (bytes, sha256) = data::fsio::sha256_file(path).map_err(|e| match e {
+        data::DataError::Io { source, .. } => io_error(path, source),
+        other => ModelError::run(path, other.to_string()),
+    })?;
     Ok(FileDigest { bytes, sha256 })
 }
 

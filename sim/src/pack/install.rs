@@ -6,11 +6,8 @@
 //! that is renamed into place when complete, so an interrupted install never looks finished and a
 //! rerun picks up where it stopped (verified wheels are kept).
 
-use std::io::Read;
 use std::path::{Path, PathBuf};
 use std::process::Command;
-
-use sha2::{Digest, Sha256};
 
 pub use crate::cache::{INSTALL_COMMAND, LIBERO_WHEELS, PackError, Wheel, cache_root};
 
@@ -23,17 +20,12 @@ fn io(path: &Path, e: impl std::fmt::Display) -> PackError {
 
 /// sha256 of a file, lower-case hex.
 pub fn sha256_file(path: &Path) -> Result<String, PackError> {
-    let mut f = std::fs::File::open(path).map_err(|e| io(path, e))?;
-    let mut h = Sha256::new();
-    let mut buf = vec![0u8; 1 << 20];
-    loop {
-        let n = f.read(&mut buf).map_err(|e| io(path, e))?;
-        if n == 0 {
-            break;
-        }
-        h.update(&buf[..n]);
-    }
-    Ok(h.finalize().iter().map(|b| format!("{b:02x}")).collect())
+    data::fsio::sha256_file(path)
+        .map(|(_, hex)| hex)
+        .map_err(|e| match e {
+            data::DataError::Io { source, .. } => io(path, source),
+            other => io(path, other),
+        })
 }
 
 /// Checks `path` against `wheel`'s pinned hash; a mismatch deletes the file and is
