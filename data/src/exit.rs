@@ -95,11 +95,6 @@ pub fn write_stdout(args: std::fmt::Arguments) {
     }
 }
 
-/// Whether stdout was found closed by an earlier write.
-pub fn stdout_closed() -> bool {
-    STDOUT_CLOSED.load(Ordering::Relaxed)
-}
-
 /// `print!` that ends quietly on a closed pipe ([`write_stdout`]).
 #[macro_export]
 macro_rules! out {

@@ -59,18 +59,22 @@ impl EpisodeEntry {
     /// size and CRC-32 of the whole file (every byte, the header and the summary included),
     /// then the mcap structure and the step count. A mismatch is bad input naming the file.
     pub fn open(&self, dir: &Path) -> Result<EpisodeReader> {
-        let path = dir.join(&self.file);
-        let bytes: std::sync::Arc<[u8]> = match std::fs::read(&path) {
-            Ok(b) => b.into(),
-            Err(e) if e.kind() == std::io::ErrorKind::NotFound => {
-                return Err(DataError::invalid(
-                    &path,
-                    "listed in index.json but missing (rebuild the index with `data stats DIR`, or regenerate the episode)",
-                ));
-            }
-            Err(e) => return Err(DataError::io(&path, e)),
-        };
+        let (path, bytes) = self.read(dir)?;
         self.check_bytes(path, bytes)
+    }
+
+    /// This episode's path in dataset `dir` and the whole file, unchecked; a file the index lists
+    /// but the directory lacks is bad input.
+    pub fn read(&self, dir: &Path) -> Result<(PathBuf, std::sync::Arc<[u8]>)> {
+        let path = dir.join(&self.file);
+        match std::fs::read(&path) {
+            Ok(b) => Ok((path, b.into())),
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => Err(DataError::invalid(
+                &path,
+                "listed in index.json but missing (rebuild the index with `data stats DIR`, or regenerate the episode)",
+            )),
+            Err(e) => Err(DataError::io(&path, e)),
+        }
     }
 
     /// The checks of [`EpisodeEntry::open`] on a file already read into memory.

@@ -152,11 +152,8 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             let idx = data::DatasetIndex::load(&dir)?;
             let (mut read_s, mut check_s, mut chunk_s, mut bytes) = (0.0, 0.0, 0.0, 0u64);
             for e in &idx.episodes {
-                let path = dir.join(&e.file);
                 let t = std::time::Instant::now();
-                let b: std::sync::Arc<[u8]> = std::fs::read(&path)
-                    .map_err(|err| data::DataError::io(&path, err))?
-                    .into();
+                let (path, b) = e.read(&dir)?;
                 read_s += t.elapsed().as_secs_f64();
                 bytes += b.len() as u64;
                 let t = std::time::Instant::now();
