@@ -2,16 +2,12 @@
 //! `scripts/chaos.sh` runs more), then rerun to the end, must leave the files of an uninterrupted
 //! run, byte for byte (episodes, index, generation record), and no temporary file.
 
+#[path = "../../tests/support/kill9.rs"]
+mod kill9;
+
 use std::path::Path;
 use std::process::{Command, Stdio};
-use std::time::{Duration, Instant};
-
-fn kills() -> usize {
-    std::env::var("CHAOS_KILLS")
-        .ok()
-        .and_then(|v| v.parse().ok())
-        .unwrap_or(3)
-}
+use std::time::Instant;
 
 fn generate(out: &Path) -> Command {
     let mut c = Command::new(env!("CARGO_BIN_EXE_sim"));
@@ -64,40 +60,12 @@ fn killed_at_random_moments_then_rerun_equals_the_uninterrupted_run() {
     );
     let full_ms = t0.elapsed().as_millis() as u64;
 
-    let mut rng = 0x5eed_u64
-        ^ std::env::var("CHAOS_SEED")
-            .ok()
-            .and_then(|v| v.parse::<u64>().ok())
-            .unwrap_or(0);
-    let mut next = |n: u64| {
-        rng ^= rng << 13;
-        rng ^= rng >> 7;
-        rng ^= rng << 17;
-        rng % n.max(1)
-    };
-    let mut killed = 0;
-    while killed < kills() {
-        let mut child = generate(&b).spawn().unwrap();
-        let wait = Duration::from_millis(next(full_ms));
-        let t = Instant::now();
-        let mut finished = false;
-        while t.elapsed() < wait {
-            if child.try_wait().unwrap().is_some() {
-                finished = true;
-                break;
-            }
-            std::thread::sleep(Duration::from_millis(2));
-        }
-        if finished {
-            // Done before the kill: start over so that every kill lands mid-run.
-            std::fs::remove_dir_all(&b).unwrap();
-            continue;
-        }
-        child.kill().unwrap();
-        child.wait().unwrap();
-        killed += 1;
-        eprintln!("kill {killed}/{} after {wait:?}", kills());
-    }
+    kill9::kill_at_random_moments(
+        &b,
+        full_ms,
+        || generate(&b).spawn().unwrap(),
+        |k, wait| eprintln!("kill {k}/{} after {wait:?}", kill9::kills()),
+    );
     let out = generate(&b).output().unwrap();
     assert!(
         out.status.success(),
@@ -108,7 +76,7 @@ fn killed_at_random_moments_then_rerun_equals_the_uninterrupted_run() {
     let names = |f: &[(String, Vec<u8>)]| f.iter().map(|x| x.0.clone()).collect::<Vec<_>>();
     assert_eq!(names(&fa), names(&fb), "no temporary file stays");
     for ((name, x), (_, y)) in fa.iter().zip(&fb) {
-        assert!(x == y, "{name} differs after {} kills", kills());
+        assert!(x == y, "{name} differs after {} kills", kill9::kills());
     }
     assert!(names(&fa).contains(&"generation.json".to_string()));
 }

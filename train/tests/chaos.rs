@@ -4,29 +4,12 @@
 //! behind.
 
 mod common;
+#[path = "../../tests/support/kill9.rs"]
+mod kill9;
 
 use std::path::Path;
 use std::process::{Command, Stdio};
-use std::time::{Duration, Instant};
-
-fn kills() -> usize {
-    std::env::var("CHAOS_KILLS")
-        .ok()
-        .and_then(|v| v.parse().ok())
-        .unwrap_or(3)
-}
-
-/// A small xorshift generator: the kill schedule is reproducible from `CHAOS_SEED`.
-struct Rng(u64);
-
-impl Rng {
-    fn below(&mut self, n: u64) -> u64 {
-        self.0 ^= self.0 << 13;
-        self.0 ^= self.0 >> 7;
-        self.0 ^= self.0 << 17;
-        self.0 % n
-    }
-}
+use std::time::Instant;
 
 fn train(config: &Path, run: &Path) -> Command {
     let mut c = Command::new(env!("CARGO_BIN_EXE_train"));
@@ -54,53 +37,30 @@ fn killed_at_random_moments_then_resumed_equals_the_uninterrupted_run() {
     std::fs::write(&config, cfg.to_toml()).unwrap();
 
     let (a, b) = (dir.path().join("a"), dir.path().join("b"));
+    let t_full = Instant::now();
     let out = train(&config, &a).output().unwrap();
     assert!(
         out.status.success(),
         "{}",
         String::from_utf8_lossy(&out.stderr)
     );
-    let t_full = Instant::now();
-    let out = train(&config, &dir.path().join("timing")).output().unwrap();
-    assert!(out.status.success());
     let full_ms = t_full.elapsed().as_millis() as u64;
 
-    let seed = std::env::var("CHAOS_SEED")
-        .ok()
-        .and_then(|v| v.parse().ok())
-        .unwrap_or(0x5eed_u64);
-    let mut rng = Rng(seed | 1);
-    let mut killed = 0;
-    while killed < kills() {
-        let mut child = train(&config, &b).spawn().unwrap();
-        // Anywhere in the run: start-up, a step, a checkpoint write, pruning.
-        let wait = Duration::from_millis(rng.below(full_ms.max(50)));
-        let t0 = Instant::now();
-        let mut finished = false;
-        while t0.elapsed() < wait {
-            if child.try_wait().unwrap().is_some() {
-                finished = true;
-                break;
-            }
-            std::thread::sleep(Duration::from_millis(2));
-        }
-        if finished {
-            // It ran to the end before the kill: start over so that every kill lands mid-run.
-            std::fs::remove_dir_all(&b).unwrap();
-            continue;
-        }
-        child.kill().unwrap();
-        child.wait().unwrap();
-        killed += 1;
-        let at = model::run::newest_valid(&b)
-            .ok()
-            .flatten()
-            .map_or(0, |c| c.info.step);
-        eprintln!(
-            "kill {killed}/{} after {wait:?}, newest checkpoint step {at}",
-            kills()
-        );
-    }
+    kill9::kill_at_random_moments(
+        &b,
+        full_ms,
+        || train(&config, &b).spawn().unwrap(),
+        |k, wait| {
+            let at = model::run::newest_valid(&b)
+                .ok()
+                .flatten()
+                .map_or(0, |c| c.info.step);
+            eprintln!(
+                "kill {k}/{} after {wait:?}, newest checkpoint step {at}",
+                kill9::kills()
+            );
+        },
+    );
     let out = train(&config, &b).output().unwrap();
     assert!(
         out.status.success(),
@@ -112,7 +72,7 @@ fn killed_at_random_moments_then_resumed_equals_the_uninterrupted_run() {
     assert!(
         common::bits(&common::final_weights(&a)) == common::bits(&common::final_weights(&b)),
         "the weights differ after {} kills",
-        kills()
+        kill9::kills()
     );
     let steps: Vec<u64> = train::metrics::read(&b.join("metrics.jsonl"))
         .unwrap()
