@@ -1,10 +1,16 @@
 //! The `sim` binary: outputs, and bad input → one clear error line, exit code 2, no panic.
 
-use std::process::Command;
+use std::process::{Command, Stdio};
 
 fn sim(args: &[&str]) -> (i32, String, String) {
+    sim_with_stdout(args, Stdio::piped())
+}
+
+/// `sim ARGS` with its stdout connected to `stdout`: exit code, stdout (when piped), stderr.
+fn sim_with_stdout(args: &[&str], stdout: impl Into<Stdio>) -> (i32, String, String) {
     let out = Command::new(env!("CARGO_BIN_EXE_sim"))
         .args(args)
+        .stdout(stdout)
         .output()
         .expect("run sim");
     (
@@ -13,6 +19,9 @@ fn sim(args: &[&str]) -> (i32, String, String) {
         String::from_utf8_lossy(&out.stderr).into_owned(),
     )
 }
+
+/// LIBERO-Mem T1's task file, the base of the damaged ones below.
+const T1_BDDL: &str = include_str!("../tasks/libero_mem/t1.bddl");
 
 fn tmp(name: &str) -> std::path::PathBuf {
     let dir = std::env::temp_dir().join(format!("sim-cli-{}", std::process::id()));
@@ -252,25 +261,13 @@ fn bddl_syntax_error_names_file_line_and_column() {
     assert!(err.contains(":1:1") || err.contains(":3:"), "{err}");
 }
 
-/// Runs `sim ARGS` with stdout a pipe whose reader is already gone (`sim … | true`).
-fn sim_into_closed_pipe(args: &[&str]) -> (i32, String) {
-    let (reader, writer) = std::io::pipe().unwrap();
-    drop(reader);
-    let out = Command::new(env!("CARGO_BIN_EXE_sim"))
-        .args(args)
-        .stdout(writer)
-        .output()
-        .unwrap();
-    (
-        out.status.code().unwrap_or(-1),
-        String::from_utf8_lossy(&out.stderr).into_owned(),
-    )
-}
-
 #[test]
 fn a_closed_stdout_ends_quietly() {
     for args in [&["tasks"][..], &["info"]] {
-        let (code, err) = sim_into_closed_pipe(args);
+        // `sim … | true`: a pipe whose reader is already gone.
+        let (reader, writer) = std::io::pipe().unwrap();
+        drop(reader);
+        let (code, _, err) = sim_with_stdout(args, writer);
         assert_eq!((code, err.as_str()), (0, ""), "sim {args:?}");
     }
 }
@@ -278,11 +275,7 @@ fn a_closed_stdout_ends_quietly() {
 #[test]
 fn a_goal_nested_10000_deep_is_exit_2_not_a_stack_overflow() {
     let path = tmp("deep.bddl");
-    let text = std::fs::read_to_string(concat!(
-        env!("CARGO_MANIFEST_DIR"),
-        "/tasks/libero_mem/t1.bddl"
-    ))
-    .unwrap();
+    let text = T1_BDDL;
     let start = text.find("(:goal").unwrap();
     let deep = format!(
         "{}(:goal {}(On akita_black_bowl_1 plate_1){}))\n",
@@ -309,11 +302,7 @@ fn a_goal_nested_10000_deep_is_exit_2_not_a_stack_overflow() {
 
 #[test]
 fn task_file_faults_are_exit_2_naming_the_file_in_render_and_generate() {
-    let t1 = std::fs::read_to_string(concat!(
-        env!("CARGO_MANIFEST_DIR"),
-        "/tasks/libero_mem/t1.bddl"
-    ))
-    .unwrap();
+    let t1 = T1_BDDL;
     let unknown = tmp("saucer.bddl");
     std::fs::write(
         &unknown,
