@@ -203,6 +203,28 @@ fn mix(mut z: u64) -> u64 {
     z ^ (z >> 31)
 }
 
+/// Every episode of `index` in dataset `dir`, opened and checked ([`crate::EpisodeEntry::open`]:
+/// size, CRC-32, structure) in parallel, in index order; the first bad one (in index order) is
+/// the error.
+pub fn open_all(dir: &Path, index: &DatasetIndex) -> Result<Vec<Arc<EpisodeReader>>> {
+    index
+        .episodes
+        .par_iter()
+        .map(|e| e.open(dir).map(Arc::new))
+        .collect::<Vec<_>>()
+        .into_iter()
+        .collect()
+}
+
+fn check_config(cfg: &WindowConfig) -> Result<()> {
+    if cfg.chunk == 0 || cfg.image_size == 0 {
+        return Err(DataError::Argument(
+            "chunk and image_size must be positive".into(),
+        ));
+    }
+    Ok(())
+}
+
 impl WindowDataset {
     /// Opens the episodes of `split` listed in `dir/index.json`.
     pub fn open(dir: impl AsRef<Path>, split: Split, cfg: WindowConfig) -> Result<Self> {
@@ -218,17 +240,46 @@ impl WindowDataset {
         split: Split,
         cfg: WindowConfig,
     ) -> Result<Self> {
-        if cfg.chunk == 0 || cfg.image_size == 0 {
-            return Err(DataError::Argument(
-                "chunk and image_size must be positive".into(),
-            ));
-        }
-        let norm = ActionNorm::from_stats(&index.stats)?;
-        let readers: Vec<(usize, Arc<EpisodeReader>)> = index
+        check_config(&cfg)?;
+        let readers = index
             .split(split)
             .par_iter()
             .map(|(i, e)| Ok((*i, Arc::new(e.open(dir)?))))
             .collect::<Result<_>>()?;
+        Self::with_readers(index, readers, cfg)
+    }
+
+    /// Like [`WindowDataset::from_index`] on episodes opened already: `opened` holds every
+    /// episode of `index` in index order (as [`open_all`] returns them), so both splits and other
+    /// passes over the data share one read and one check of each file.
+    pub fn from_opened(
+        index: &DatasetIndex,
+        opened: &[Arc<EpisodeReader>],
+        split: Split,
+        cfg: WindowConfig,
+    ) -> Result<Self> {
+        check_config(&cfg)?;
+        if opened.len() != index.episodes.len() {
+            return Err(DataError::Argument(format!(
+                "{} opened episodes for an index of {}",
+                opened.len(),
+                index.episodes.len()
+            )));
+        }
+        let readers = index
+            .split(split)
+            .into_iter()
+            .map(|(i, _)| (i, opened[i].clone()))
+            .collect();
+        Self::with_readers(index, readers, cfg)
+    }
+
+    fn with_readers(
+        index: &DatasetIndex,
+        readers: Vec<(usize, Arc<EpisodeReader>)>,
+        cfg: WindowConfig,
+    ) -> Result<Self> {
+        let norm = ActionNorm::from_stats(&index.stats)?;
         let samples = readers
             .iter()
             .enumerate()

@@ -280,3 +280,44 @@ fn chunks_walk_an_episode_and_mask_past_its_end() {
         "another pass, another draw"
     );
 }
+
+/// Episodes opened once ([`data::window::open_all`]) give the same windows as each split opening
+/// its own; a list of another length is refused, and the first damaged file in index order is
+/// the error whatever order the threads read in.
+#[test]
+fn windows_of_episodes_opened_once_equal_windows_of_the_split() {
+    let (dir, _) = dataset(&[6, 9, 4, 7]);
+    let index = DatasetIndex::load(dir.path()).unwrap();
+    let cfg = WindowConfig {
+        past: 2,
+        future: 0,
+        chunk: 2,
+        image_size: 8,
+        ..Default::default()
+    };
+    let opened = data::window::open_all(dir.path(), &index).unwrap();
+    assert_eq!(opened.len(), 4);
+    let a = WindowDataset::from_opened(&index, &opened, Split::Train, cfg.clone()).unwrap();
+    let b = WindowDataset::from_index(dir.path(), &index, Split::Train, cfg.clone()).unwrap();
+    assert_eq!(a.len(), 26);
+    assert_eq!(a.len(), b.len());
+    for k in 0..a.len() {
+        assert_eq!(a.get(k).unwrap(), b.get(k).unwrap(), "sample {k}");
+    }
+    let short = WindowDataset::from_opened(&index, &opened[..3], Split::Train, cfg).err();
+    assert_eq!(
+        short.map(|e| e.to_string()).as_deref(),
+        Some("invalid argument: 3 opened episodes for an index of 4")
+    );
+    // Damage the second and the fourth episode: the second is named.
+    for e in [&index.episodes[1], &index.episodes[3]] {
+        let p = dir.path().join(&e.file);
+        let bytes = std::fs::read(&p).unwrap();
+        std::fs::write(&p, &bytes[..bytes.len() / 2]).unwrap();
+    }
+    let err = data::window::open_all(dir.path(), &index)
+        .unwrap_err()
+        .to_string();
+    assert!(err.contains(&index.episodes[1].file), "{err}");
+    assert!(!err.contains(&index.episodes[3].file), "{err}");
+}

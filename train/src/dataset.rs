@@ -5,9 +5,10 @@
 
 #[cfg(feature = "generate")]
 use std::path::Path;
+use std::sync::Arc;
 
 use burn::prelude::*;
-use data::{DatasetIndex, Split, WindowConfig, WindowDataset};
+use data::{DatasetIndex, EpisodeReader, Split, WindowConfig, WindowDataset};
 #[cfg(feature = "generate")]
 use indicatif::{ProgressBar, ProgressStyle};
 use model::Processor;
@@ -137,13 +138,16 @@ pub struct RunData {
 impl RunData {
     /// Opens `[data].dir` for a model of `model` (image size, text length; in state mode the
     /// object-state spec it was built for, see [`state_spec`]).
+    ///
+    /// `index` is the dataset's index and `opened` every episode of it in index order
+    /// ([`data::window::open_all`]).
     pub fn open(
         cfg: &Config,
         model: &model::ModelConfig,
         state: Option<StateSpec>,
+        index: DatasetIndex,
+        opened: &[Arc<EpisodeReader>],
     ) -> Result<Self> {
-        let dir = &cfg.data.dir;
-        let index = DatasetIndex::load(dir)?;
         let [h, w] = model.image_size;
         if h != w {
             return Err(TrainError::Usage(format!(
@@ -161,11 +165,11 @@ impl RunData {
             augment: cfg.data.augment.then(data::Augment::default),
             seed: cfg.train.seed,
         };
-        let train = WindowDataset::from_index(dir, &index, Split::Train, win.clone())?;
+        let train = WindowDataset::from_opened(&index, opened, Split::Train, win.clone())?;
         if train.is_empty() {
             return Err(TrainError::Usage(format!(
                 "dataset {}: the train split is empty",
-                dir.display()
+                cfg.data.dir.display()
             )));
         }
         let val_win = WindowConfig {
@@ -175,7 +179,12 @@ impl RunData {
         let val = if index.split(Split::Val).is_empty() {
             None
         } else {
-            Some(WindowDataset::from_index(dir, &index, Split::Val, val_win)?)
+            Some(WindowDataset::from_opened(
+                &index,
+                opened,
+                Split::Val,
+                val_win,
+            )?)
         };
         let processor = match state {
             None => Processor::new(model, train.action_norm().clone()),
@@ -377,14 +386,20 @@ impl EpisodeSampler {
 /// episode, the most objects in one scene, and the standardisation of the token features over
 /// every 4th frame of the training episodes. Every episode must have been recorded with object
 /// poses (episode schema 2); the first that was not is named in the error.
-pub fn state_spec(dir: &Path, index: &DatasetIndex) -> Result<StateSpec> {
+///
+/// `opened` holds every episode of `index`, in index order ([`data::window::open_all`]).
+pub fn state_spec(
+    dir: &Path,
+    index: &DatasetIndex,
+    opened: &[Arc<EpisodeReader>],
+) -> Result<StateSpec> {
     use rayon::prelude::*;
     let stats = index
         .episodes
         .par_iter()
-        .map(|e| -> Result<StateStats> {
+        .zip(opened)
+        .map(|(e, r)| -> Result<StateStats> {
             let path = dir.join(&e.file);
-            let r = e.open(dir)?;
             let steps = r.read_raw_steps(0..r.len())?;
             let missing = || {
                 TrainError::Usage(format!(
@@ -421,10 +436,10 @@ pub fn state_spec(dir: &Path, index: &DatasetIndex) -> Result<StateSpec> {
 /// Checks that every episode of the dataset records its goal progress (`/goal` with a known
 /// goal length), which an oracle variant reads; the first that does not (e.g. imported from
 /// RLDS, which has no subgoals) is named in the error.
-pub fn check_goals(dir: &Path, index: &DatasetIndex) -> Result<()> {
-    for e in &index.episodes {
+/// `opened` as in [`state_spec`].
+pub fn check_goals(dir: &Path, index: &DatasetIndex, opened: &[Arc<EpisodeReader>]) -> Result<()> {
+    for (e, r) in index.episodes.iter().zip(opened) {
         let path = dir.join(&e.file);
-        let r = e.open(dir)?;
         let has_channel = r
             .channels()
             .iter()

@@ -239,20 +239,23 @@ pub fn train(cfg: &Config, opts: &TrainOptions) -> Result<TrainSummary> {
     let index = data::DatasetIndex::load(&cfg.data.dir)?;
     let vocab = RunData::model_vocab(&index)?;
     let mut mcfg: ModelConfig = cfg.model_config(vocab).map_err(|m| config_error(&cfg, m))?;
+    // Every episode read and checked once, for the checks below and both splits' windows.
+    let opened = data::window::open_all(&cfg.data.dir, &index)?;
     if mcfg.variant.needs_subgoal_text() {
-        crate::dataset::check_goals(&cfg.data.dir, &index)?;
+        crate::dataset::check_goals(&cfg.data.dir, &index, &opened)?;
     }
     let state = match cfg.model.obs {
         ObsMode::Pixels => None,
         ObsMode::State => {
-            let spec = crate::dataset::state_spec(&cfg.data.dir, &index)?;
+            let spec = crate::dataset::state_spec(&cfg.data.dir, &index, &opened)?;
             mcfg = mcfg.with_state(spec.tokens(), spec.num_categories());
             mcfg.validate()
                 .map_err(|e| config_error(&cfg, e.to_string()))?;
             Some(spec)
         }
     };
-    let data = RunData::open(&cfg, &mcfg, state)?;
+    let data = RunData::open(&cfg, &mcfg, state, index, &opened)?;
+    drop(opened);
 
     std::fs::create_dir_all(&run).map_err(|e| TrainError::io(&run, e))?;
     checkpoint::clean_temporaries(&run)?;
