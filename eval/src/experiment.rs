@@ -530,7 +530,9 @@ pub fn markdown(x: &Experiment, runs: &[RunResult], missing: &[(String, String)]
                 );
             }
             if suite == "libero_mem" {
-                s.push_str(&memory_claim(m, &by_variant));
+                for recipe in recipes(&by_variant) {
+                    s.push_str(&memory_claim(m, &by_variant, &recipe));
+                }
             }
         }
         // Success / completion means of every run of this mode.
@@ -591,16 +593,39 @@ pub const COUNTING_TASKS: [&str; 4] = [
 /// task for the memory claim to hold.
 pub const CLAIM_MARGIN: f64 = 30.0;
 
+/// The run-tag suffixes under which a memory claim can be compared: `""` (untagged runs) and every
+/// tag other than the `windows` ablation that some e_slotssm or slotvla_h1 run carries (`"+plain"`
+/// for `e_slotssm+plain`), in first-seen order.
+fn recipes(by_variant: &[(&str, Vec<&TaskSummary>)]) -> Vec<String> {
+    let mut out = vec![String::new()];
+    for (label, _) in by_variant {
+        let Some((base, tag)) = label.split_once('+') else {
+            continue;
+        };
+        if matches!(base, "e_slotssm" | "slotvla_h1")
+            && !tag.starts_with("windows")
+            && !out.iter().any(|r| r.strip_prefix('+') == Some(tag))
+        {
+            out.push(format!("+{tag}"));
+        }
+    }
+    out
+}
+
 /// The memory claim section of one mode (empty when no counting task has both sides): on each
 /// counting task, subgoal completion (success in parentheses) of e_slotssm minus slotvla_h1 (equal
 /// inputs, no oracle label), of e_slotssm minus e_slotssm trained on independent windows, and of
 /// e_slotssm_oracle minus e_slotssm; and whether the claim (≥ [`CLAIM_MARGIN`] points on every
 /// counting task measured) holds.
-fn memory_claim(mode: &str, by_variant: &[(&str, Vec<&TaskSummary>)]) -> String {
+///
+/// `recipe` is a run tag suffix (`""` or e.g. `"+plain"`): the comparison is then between the runs
+/// of that tag (the same data and training recipe on both sides).
+fn memory_claim(mode: &str, by_variant: &[(&str, Vec<&TaskSummary>)], recipe: &str) -> String {
     let find = |variant: &str, task: &str| -> Option<&TaskSummary> {
+        let label = format!("{variant}{recipe}");
         by_variant
             .iter()
-            .find(|(v, _)| *v == variant)
+            .find(|(v, _)| *v == label)
             .and_then(|(_, rows)| rows.iter().find(|t| t.task == task).copied())
     };
     let measured: Vec<&str> = COUNTING_TASKS
@@ -610,28 +635,34 @@ fn memory_claim(mode: &str, by_variant: &[(&str, Vec<&TaskSummary>)]) -> String 
     if measured.is_empty() {
         return String::new();
     }
+    let r = recipe;
     let comparisons = [
         (
-            "e_slotssm − slotvla_h1 (the claim)",
+            format!("e_slotssm{r} − slotvla_h1{r} (the claim)"),
             "e_slotssm",
             "slotvla_h1",
         ),
         (
-            "e_slotssm − e_slotssm+windows (carried memory vs independent windows)",
+            format!("e_slotssm{r} − e_slotssm+windows{r} (carried memory vs independent windows)"),
             "e_slotssm",
             "e_slotssm+windows",
         ),
         (
-            "e_slotssm_oracle − e_slotssm (what the oracle label adds)",
+            format!("e_slotssm_oracle{r} − e_slotssm{r} (what the oracle label adds)"),
             "e_slotssm_oracle",
             "e_slotssm",
         ),
     ];
+    let title = if recipe.is_empty() {
+        String::new()
+    } else {
+        format!(" ({recipe} runs)")
+    };
     let mut s = format!(
-        "### {mode} mode: the memory claim on the counting tasks\n\nPoints of subgoal completion \
-         (success in parentheses) between two variants on each counting task; the claim: e_slotssm \
-         ≥ {CLAIM_MARGIN:.0} points above the memoryless slotvla_h1 with equal inputs (no oracle \
-         label) on every counting task.\n\n"
+        "### {mode} mode: the memory claim on the counting tasks{title}\n\nPoints of subgoal \
+         completion (success in parentheses) between two variants on each counting task; the \
+         claim: e_slotssm ≥ {CLAIM_MARGIN:.0} points above the memoryless slotvla_h1 with equal \
+         inputs (no oracle label) on every counting task.\n\n"
     );
     table_header(&mut s, "comparison", &measured);
     // The claim's own margins (every measured task has both sides), per task.
@@ -940,6 +971,55 @@ mod tests {
         // Without slotvla_h1 there is no claim to measure.
         runs.remove(2);
         assert!(!markdown(&x, &runs, &[]).contains("memory claim"));
+    }
+
+    /// Tagged runs (another data recipe on both sides) get their own claim section, compared
+    /// only with runs of the same tag; the `windows` ablation is not a recipe of its own.
+    #[test]
+    fn memory_claim_compares_runs_of_the_same_tag() {
+        let x = experiment();
+        let t3 = "libero_mem/t3";
+        let runs = vec![
+            state_run("e_slotssm", vec![row(t3, 40.0, 5.0)]),
+            state_run("slotvla_h1", vec![row(t3, 5.0, 0.0)]),
+            state_run("e_slotssm+windows", vec![row(t3, 20.0, 0.0)]),
+            state_run("e_slotssm+plain", vec![row(t3, 90.0, 60.0)]),
+            state_run("slotvla_h1+plain", vec![row(t3, 70.0, 10.0)]),
+            state_run("e_slotssm_oracle+plain", vec![row(t3, 100.0, 95.0)]),
+        ];
+        let md = markdown(&x, &runs, &[]);
+        assert_eq!(
+            md.matches("the memory claim on the counting tasks").count(),
+            2
+        );
+        let plain = md
+            .split("the memory claim on the counting tasks (+plain runs)")
+            .nth(1)
+            .expect("a section of the +plain runs");
+        assert!(
+            plain.contains(
+                "| e_slotssm+plain − slotvla_h1+plain (the claim) | +20 (+50) | **+20.0** (+50.0) |"
+            ),
+            "{plain}"
+        );
+        assert!(
+            plain.contains("what the oracle label adds) | +10 (+35) |"),
+            "{plain}"
+        );
+        assert!(!plain.contains("independent windows"), "{plain}");
+        assert!(
+            plain.contains("the margin is below 30 points on t3 (+20)"),
+            "{plain}"
+        );
+        let untagged = md.split("(+plain runs)").next().unwrap();
+        assert!(
+            untagged.contains("| e_slotssm − slotvla_h1 (the claim) | +35 (+5) |"),
+            "{untagged}"
+        );
+        assert!(
+            untagged.contains("independent windows) | +20 (+5) |"),
+            "{untagged}"
+        );
     }
 
     /// An experiment file `x.toml` with `text` in a fresh folder (kept alive by the returned guard).
