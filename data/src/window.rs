@@ -207,8 +207,13 @@ fn mix(mut z: u64) -> u64 {
 /// size, CRC-32, structure) in parallel, in index order; the first bad one (in index order) is
 /// the error.
 pub fn open_all(dir: &Path, index: &DatasetIndex) -> Result<Vec<Arc<EpisodeReader>>> {
-    index
-        .episodes
+    open_each(dir, &index.episodes.iter().collect::<Vec<_>>())
+}
+
+/// `entries` opened in parallel ([`crate::EpisodeEntry::open`]), in their order; the first bad
+/// one in that order is the error, whatever order the threads read in.
+fn open_each(dir: &Path, entries: &[&crate::EpisodeEntry]) -> Result<Vec<Arc<EpisodeReader>>> {
+    entries
         .par_iter()
         .map(|e| e.open(dir).map(Arc::new))
         .collect::<Vec<_>>()
@@ -241,11 +246,8 @@ impl WindowDataset {
         cfg: WindowConfig,
     ) -> Result<Self> {
         check_config(&cfg)?;
-        let readers = index
-            .split(split)
-            .par_iter()
-            .map(|(i, e)| Ok((*i, Arc::new(e.open(dir)?))))
-            .collect::<Result<_>>()?;
+        let (ids, entries): (Vec<usize>, Vec<_>) = index.split(split).into_iter().unzip();
+        let readers = ids.into_iter().zip(open_each(dir, &entries)?).collect();
         Self::with_readers(index, readers, cfg)
     }
 

@@ -255,7 +255,6 @@ pub fn train(cfg: &Config, opts: &TrainOptions) -> Result<TrainSummary> {
         }
     };
     let data = RunData::open(&cfg, &mcfg, state, index, &opened)?;
-    drop(opened);
 
     std::fs::create_dir_all(&run).map_err(|e| TrainError::io(&run, e))?;
     checkpoint::clean_temporaries(&run)?;
