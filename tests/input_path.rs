@@ -3,7 +3,8 @@
 //! (`eval::policy::model_input` on the live simulator observations of the same seed and
 //! actions) gives the same model tensors, bit for bit: frames (or in state mode the object
 //! tokens and their categories), instruction ids and the oracle subgoal ids of every step
-//! (pending text for pixels, the per-object labels in state mode).
+//! (the per-object labels; with pixels also the objects' boxes from the segmentation, which
+//! the model matches to its slots).
 
 use burn::prelude::*;
 use model::Frames;
@@ -74,6 +75,7 @@ fn replay(obs: train::config::ObsMode) {
     eval::policy::Policy::reset(&mut policy, &task, seed).unwrap();
     let mut obs_t = env.reset(seed).unwrap();
     let mut subgoal_changes = 0;
+    let mut seen_boxes = 0;
     let mut previous_subgoal = None;
     for t in 0..n {
         let live = policy.input(&env, &obs_t).unwrap();
@@ -96,9 +98,24 @@ fn replay(obs: train::config::ObsMode) {
         }
         assert_eq!(ints(batch.instruction), ints(live.instruction), "step {t}");
         let sub_train = batch.subgoal.expect("the oracle variant reads subgoals");
-        let [_, _, g, l] = sub_train.dims();
-        let sub_train = ints(sub_train.narrow(1, w - 1, 1).reshape([g, l]));
-        let sub_live = ints(live.subgoal.expect("subgoal").reshape([g, l]));
+        let sub_live = live.subgoal.expect("subgoal");
+        let [_, _, g, l] = sub_train.ids.dims();
+        match (sub_train.boxes, sub_live.boxes) {
+            (Some(a), Some(b)) => {
+                let [_, _, j, _] = a.dims();
+                let a = floats(a.narrow(1, w - 1, 1).reshape([j, 4]));
+                assert_eq!(
+                    a,
+                    floats(b.reshape([j, 4])),
+                    "step {t}: object boxes differ"
+                );
+                seen_boxes += a.chunks(4).filter(|x| x[2] != 0).count();
+            }
+            (None, None) => assert_eq!(obs, train::config::ObsMode::State, "step {t}"),
+            _ => panic!("step {t}: one path gives object boxes, the other not"),
+        }
+        let sub_train = ints(sub_train.ids.narrow(1, w - 1, 1).reshape([g, l]));
+        let sub_live = ints(sub_live.ids.reshape([g, l]));
         assert_eq!(sub_train, sub_live, "step {t}: subgoal ids differ");
         if previous_subgoal.as_ref() != Some(&sub_live) {
             subgoal_changes += 1;
@@ -108,6 +125,12 @@ fn replay(obs: train::config::ObsMode) {
         obs_t = env.step(&step.action).unwrap();
     }
     assert!(subgoal_changes >= 2, "the subgoal input never changed");
+    if obs == train::config::ObsMode::Pixels {
+        assert!(
+            seen_boxes >= n,
+            "{seen_boxes} boxes of seen objects in {n} steps"
+        );
+    }
 }
 
 #[test]

@@ -463,7 +463,11 @@ impl WindowDataset {
                     } else {
                         Some(raw[f - 1 - lo].objects.as_slice())
                     };
-                    observed_labels(previous, &raw[f - lo].objects)
+                    let mut objects = observed_labels(previous, &raw[f - lo].objects);
+                    if let Some(a) = aug.as_ref().filter(|_| c.images) {
+                        shift_boxes(&mut objects, a.dx, a.dy, c.image_size);
+                    }
+                    objects
                 })
                 .collect(),
             frame_steps,
@@ -550,6 +554,16 @@ impl AugParams {
     }
 }
 
+/// Moves the seen objects' boxes with the content of a frame shifted by [`to_chw`] (output
+/// pixel (x, y) shows input pixel (x + dx, y + dy) of a `size`² frame), so boxes and pixels
+/// stay aligned under augmentation.
+fn shift_boxes(objects: &mut [ObjectAnnotation], dx: i64, dy: i64, size: u32) {
+    for o in objects.iter_mut().filter(|o| o.visible) {
+        o.bbox[0] -= dx as f32 / size as f32;
+        o.bbox[1] -= dy as f32 / size as f32;
+    }
+}
+
 /// `[H, W, 3]` u8 → `[3, H, W]` f32 in [0, 1], with optional augmentation
 /// (shift, then brightness, contrast, saturation, hue, then clamp).
 fn to_chw(img: &RgbImage, aug: Option<&AugParams>) -> Vec<f32> {
@@ -616,4 +630,76 @@ fn to_chw(img: &RgbImage, aug: Option<&AugParams>) -> Vec<f32> {
         }
     }
     out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn shifted_boxes_stay_on_the_shifted_pixels() {
+        // A 16² black frame with a white 3×2 block at x 5..8, y 9..11.
+        let size = 16u32;
+        let mut data = vec![0u8; 16 * 16 * 3];
+        for y in 9..11 {
+            for x in 5..8 {
+                data[(y * 16 + x) * 3..(y * 16 + x) * 3 + 3].copy_from_slice(&[255; 3]);
+            }
+        }
+        let img = RgbImage {
+            width: size,
+            height: size,
+            channels: 3,
+            data,
+        };
+        let aug = AugParams {
+            brightness: 0.0,
+            contrast: 1.0,
+            saturation: 1.0,
+            hue: 0.0,
+            dx: 2,
+            dy: -3,
+        };
+        let out = to_chw(&img, Some(&aug));
+        let box_of = |o: &ObjectAnnotation| {
+            let s = size as f32;
+            let x0 = (o.bbox[0] * s).round() as usize;
+            let y0 = (o.bbox[1] * s).round() as usize;
+            (
+                x0,
+                y0,
+                (o.bbox[2] * s).round() as usize,
+                (o.bbox[3] * s).round() as usize,
+            )
+        };
+        let seen = ObjectAnnotation {
+            instance_id: 1,
+            name: "block".into(),
+            bbox: [5.0 / 16.0, 9.0 / 16.0, 3.0 / 16.0, 2.0 / 16.0],
+            visible: true,
+            subgoal_label: "0".into(),
+            pose: None,
+            grasped: None,
+        };
+        let unseen = ObjectAnnotation {
+            bbox: [0.0; 4],
+            visible: false,
+            ..seen.clone()
+        };
+        let mut objects = vec![seen, unseen];
+        shift_boxes(&mut objects, aug.dx, aug.dy, size);
+        let (x0, y0, w, h) = box_of(&objects[0]);
+        assert_eq!((x0, y0, w, h), (3, 12, 3, 2));
+        // Exactly the white pixels of the shifted frame lie in the shifted box.
+        for y in 0..16 {
+            for x in 0..16 {
+                let inside = (x0..x0 + w).contains(&x) && (y0..y0 + h).contains(&y);
+                assert_eq!(out[y * 16 + x] > 0.5, inside, "pixel ({x}, {y})");
+            }
+        }
+        assert_eq!(
+            objects[1].bbox, [0.0; 4],
+            "an unseen object keeps its zero box"
+        );
+    }
 }

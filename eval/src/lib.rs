@@ -218,14 +218,15 @@ pub fn run_episode(
     })
 }
 
-/// An environment configured for `policy` (rendering only when it needs images or when recording).
+/// An environment configured for `policy` (rendering only when it needs images or when recording,
+/// with segmentation when it reads object boxes or when recording).
 pub fn env_for(task: &TaskSpec, policy: &dyn Policy, cfg: &EvalConfig) -> Result<Env, EvalError> {
     let record = cfg.record.is_some();
     Env::from_task_with_assets(
         task,
         EnvConfig {
             render: policy.needs_images() || record,
-            segmentation: record,
+            segmentation: record || policy.needs_segmentation(),
             image_size: cfg.image_size,
             quality: cfg.quality,
             settle_steps: if libero_protocol(task, cfg) {

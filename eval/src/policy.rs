@@ -23,6 +23,10 @@ pub trait Policy {
     fn act(&mut self, env: &Env, obs: &Observation) -> Result<[f32; 7], EvalError>;
     /// Whether the policy needs camera images (off: faster state-only rollouts).
     fn needs_images(&self) -> bool;
+    /// Whether the policy needs the agentview segmentation (the objects' boxes) every step.
+    fn needs_segmentation(&self) -> bool {
+        false
+    }
     /// Slot-attention masks of the latest step, `[K][rows·cols]` with the token grid's
     /// `(rows, cols)`; `None` for policies without slots.
     fn slot_masks(&self) -> Option<(Vec<Vec<f32>>, usize, usize)> {
@@ -100,8 +104,9 @@ impl Policy for ExpertPolicy {
 }
 
 /// A trained model run step by step through the policy's one input path
-/// ([`model::Processor`], saved with the run): each step the agentview frame (or, in state
-/// mode, the objects' poses, grasps and oracle labels), the instruction and the goal progress
+/// ([`model::Processor`], saved with the run): each step the agentview frame (with the oracle
+/// variant also the objects' boxes and labels; in state mode instead the objects' poses, grasps
+/// and oracle labels), the instruction and the goal progress
 /// the environment reports go in (the processor decides what the variant reads of them, exactly
 /// as in training); the first action of the predicted chunk comes out,
 /// un-normalised by the processor, clamped to [−1, 1], with the gripper binarised by its sign
@@ -136,10 +141,10 @@ impl ModelPolicy {
     }
 
     /// The model inputs of the observation `obs` of `env` at the next step of the episode
-    /// (call once per step, after [`Policy::reset`]; in state mode it also advances the oracle
-    /// labels, as the recorder does).
+    /// (call once per step, after [`Policy::reset`]; when the model reads objects it also
+    /// advances the oracle labels, as the recorder does).
     pub fn input(&mut self, env: &Env, obs: &Observation) -> Result<model::StepInput, EvalError> {
-        let objects = if self.processor.reads_state() {
+        let objects = if self.processor.reads_state() || self.processor.reads_boxes() {
             // The labels as the recorder writes them: updated after every step (not at reset).
             match self.labels.as_mut() {
                 Some(t) => t.update(env, obs.goal.as_ref()),
@@ -167,30 +172,14 @@ impl ModelPolicy {
 }
 
 /// The objects of a task scene as the episode files record them: instance names in scene order,
-/// the observed poses and grasps, and the given oracle labels.
+/// boxes from the segmentation (when rendered), the observed poses and grasps, and the given
+/// oracle labels ([`sim::record::object_annotations`], the recorder's own code).
 pub fn object_annotations(
     env: &Env,
     obs: &Observation,
     labels: &[String],
 ) -> Vec<ObjectAnnotation> {
-    let Some(scene) = env.scene() else {
-        return Vec::new();
-    };
-    scene
-        .instances
-        .iter()
-        .zip(&obs.objects)
-        .enumerate()
-        .map(|(k, (inst, st))| ObjectAnnotation {
-            instance_id: k as i32 + 1,
-            name: inst.name.clone(),
-            bbox: [0.0; 4],
-            visible: false,
-            subgoal_label: labels.get(k).cloned().unwrap_or_else(|| "0".into()),
-            pose: Some(st.pose()),
-            grasped: Some(st.grasped),
-        })
-        .collect()
+    sim::record::object_annotations(env, obs, labels)
 }
 
 /// Eval's input path: one simulator observation → the model's inputs, through `processor`
@@ -265,6 +254,10 @@ impl Policy for ModelPolicy {
         !self.processor.reads_state()
     }
 
+    fn needs_segmentation(&self) -> bool {
+        self.processor.reads_boxes()
+    }
+
     fn slot_masks(&self) -> Option<(Vec<Vec<f32>>, usize, usize)> {
         let masks = self.policy.last_masks()?;
         let [rows, cols] = self.grid;
@@ -308,5 +301,50 @@ mod tests {
             }
         }
         assert!(done, "the expert finishes T1 within its budget");
+    }
+
+    #[test]
+    fn a_pixel_oracle_model_gets_an_environment_with_segmentation_and_reads_boxes() {
+        let task = sim::task::resolve("t1").unwrap();
+        let device = Device::flex();
+        let policy = |variant: &str| {
+            let cfg = model::ModelConfig::tiny(model::Variant::from_name(variant).unwrap())
+                .with_vocab_from([task.instruction.as_str()]);
+            let m = model::PolicyModel::new(&cfg, &device).unwrap();
+            let norm = data::ActionNorm {
+                q01: [-1.0; 7],
+                q99: [1.0; 7],
+                mask: [true, true, true, true, true, true, false],
+            };
+            let p = model::Processor::new(&cfg, norm);
+            ModelPolicy::new(m, p, &device).unwrap()
+        };
+        let eval_cfg = crate::EvalConfig {
+            image_size: 64,
+            ..Default::default()
+        };
+        let mut oracle = policy("e_slotssm_oracle");
+        assert!(oracle.needs_segmentation());
+        let mut env = crate::env_for(&task, &oracle, &eval_cfg).unwrap();
+        assert!(env.config().segmentation && env.config().render);
+        oracle.reset(&task, 5).unwrap();
+        let obs = env.reset(5).unwrap();
+        let input = oracle.input(&env, &obs).unwrap();
+        let sub = input.subgoal.expect("the oracle reads labels");
+        let boxes = sub.boxes.expect("matched to slots by boxes");
+        let [_, j, _] = boxes.dims();
+        assert_eq!(j, env.scene().unwrap().instances.len());
+        let seen = boxes
+            .into_data()
+            .try_to_vec::<f32>()
+            .unwrap()
+            .chunks(4)
+            .filter(|b| b[2] > 0.0 && b[3] > 0.0)
+            .count();
+        assert!(seen >= 2, "{seen} objects seen at the start of T1");
+        let plain = policy("e_slotssm");
+        assert!(!plain.needs_segmentation());
+        let env = crate::env_for(&task, &plain, &eval_cfg).unwrap();
+        assert!(!env.config().segmentation);
     }
 }

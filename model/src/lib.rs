@@ -43,6 +43,7 @@ pub mod heads;
 pub mod io;
 pub mod losses;
 pub mod mamba;
+pub mod matching;
 pub mod policy;
 pub mod relation;
 pub mod run;
@@ -59,6 +60,7 @@ pub use io::{Processor, StepInput, StepObservation, Tokenizer};
 pub use policy::{Carry, Losses, PolicyModel, WindowBatch, WindowOutput};
 pub use run::RunDir;
 pub use streaming::StreamingPolicy;
+pub use variants::Subgoal;
 
 /// The CPU device of the unit tests (flex, pure Rust), seeded with 0.
 ///

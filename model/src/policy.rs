@@ -15,7 +15,7 @@ use crate::encoder::{Frames, Observer};
 use crate::error::{ModelError, Result};
 use crate::losses;
 use crate::text::TextEncoder;
-pub use crate::variants::Carry;
+pub use crate::variants::{Carry, Subgoal};
 use crate::variants::{Shared, TokenBuilder};
 
 /// A training batch of windows.
@@ -31,8 +31,8 @@ pub struct WindowBatch {
     pub action_mask: Option<Tensor<4>>,
     /// Instruction token ids `[B, L_txt]` (see [`crate::io::Tokenizer`]).
     pub instruction: Tensor<2, Int>,
-    /// Oracle subgoal token ids `[B, T, G, L_sg]`, G = 1 (shared by all slots) or K (per slot).
-    pub subgoal: Option<Tensor<4, Int>>,
+    /// Oracle subgoal (token ids `[B, T, G, L_sg]`, see [`Subgoal`]).
+    pub subgoal: Option<Subgoal<4>>,
 }
 
 /// Everything the window forward computes.
@@ -149,7 +149,7 @@ impl PolicyModel {
         &self,
         images: impl Into<Frames>,
         instruction: Tensor<2, Int>,
-        subgoal: Option<Tensor<4, Int>>,
+        subgoal: Option<Subgoal<4>>,
     ) -> Result<WindowOutput> {
         self.predict_from(images, instruction, subgoal, Carry::default())
             .map(|(out, _)| out)
@@ -164,7 +164,7 @@ impl PolicyModel {
         &self,
         obs: impl Into<Frames>,
         instruction: Tensor<2, Int>,
-        subgoal: Option<Tensor<4, Int>>,
+        subgoal: Option<Subgoal<4>>,
         carry: Carry,
     ) -> Result<(WindowOutput, Carry)> {
         let obs = obs.into();
@@ -361,7 +361,7 @@ mod tests {
             frame_mask: Tensor::from_data(TensorData::new(mask, [b, t]), device),
             action_mask: None,
             instruction: tok.encode_batch(&texts, device),
-            subgoal: Some(subgoal),
+            subgoal: Some(subgoal.into()),
         }
     }
 
@@ -539,7 +539,7 @@ mod tests {
             tok.encode_batch(&sub_texts, &device)
                 .reshape([1, frames, 1, cfg.text.max_len]);
         let full = model
-            .predict(images.clone(), instr.clone(), Some(subgoal.clone()))
+            .predict(images.clone(), instr.clone(), Some(subgoal.clone().into()))
             .unwrap()
             .actions;
         let mut policy = StreamingPolicy::new(model, &device).unwrap();
@@ -552,6 +552,85 @@ mod tests {
             worst = worst.max((chunk - want).abs().max().into_scalar::<f32>());
         }
         assert!(worst < 1e-4, "{}: max diff {worst}", cfg.variant.name());
+    }
+
+    /// Per-object labels and boxes of `frames` frames of 2 objects (object 1 unseen in every
+    /// third frame): ids `[1, T, 3, L]` (the 2 labels, then "0"), boxes `[1, T, 2, 4]`.
+    fn matched_subgoal(cfg: &ModelConfig, frames: usize, device: &Device) -> Subgoal<4> {
+        let tok = Tokenizer::new(&cfg.text);
+        let mut texts = Vec::new();
+        let mut boxes = Vec::new();
+        for t in 0..frames {
+            texts.extend([if t < frames / 2 { "0" } else { "bowl" }, "drawer", "0"]);
+            let x = 0.05 * (t % 8) as f32;
+            boxes.extend([x, 0.1, 0.3, 0.25]);
+            boxes.extend(if t % 3 == 2 {
+                [0.0; 4]
+            } else {
+                [0.5, 0.55, 0.4, 0.4]
+            });
+        }
+        Subgoal {
+            ids: tok
+                .encode_batch(&texts, device)
+                .reshape([1, frames, 3, cfg.text.max_len]),
+            boxes: Some(Tensor::from_data(
+                TensorData::new(boxes, [1, frames, 2, 4]),
+                device,
+            )),
+        }
+    }
+
+    #[test]
+    fn streaming_equals_full_forward_with_labels_matched_to_slots() {
+        let (_guard, device) = test_device();
+        device.seed(9);
+        let cfg = micro("e_slotssm_oracle");
+        let frames = 12;
+        let model = PolicyModel::new(&cfg, &device).unwrap();
+        let x = batch(&cfg, 1, frames, &device);
+        let images = x.obs.pixels().unwrap();
+        let sub = matched_subgoal(&cfg, frames, &device);
+        let full = model
+            .predict(images.clone(), x.instruction.clone(), Some(sub.clone()))
+            .unwrap()
+            .actions;
+        // The labels reach the slots: all-"0" labels give other actions.
+        let zeros = Subgoal {
+            ids: Tokenizer::new(&cfg.text)
+                .encode_batch(&vec!["0"; frames * 3], &device)
+                .reshape([1, frames, 3, cfg.text.max_len]),
+            ..sub.clone()
+        };
+        let blank = model
+            .predict(images.clone(), x.instruction.clone(), Some(zeros))
+            .unwrap()
+            .actions;
+        let moved: f32 = (blank - full.clone()).abs().max().into_scalar();
+        assert!(moved > 1e-5, "matched labels changed nothing");
+        let mut policy = StreamingPolicy::new(model, &device).unwrap();
+        let mut worst = 0.0f32;
+        for t in 0..frames {
+            let img = images.clone().narrow(1, t, 1);
+            let step = sub.clone().narrow_time(t, 1).frames();
+            let chunk = policy
+                .act_frames(Frames::Pixels(img), x.instruction.clone(), Some(step))
+                .unwrap();
+            let want = full.clone().narrow(1, t, 1).reshape(chunk.dims());
+            worst = worst.max((chunk - want).abs().max().into_scalar::<f32>());
+        }
+        assert!(worst < 1e-4, "max diff {worst}");
+        // Label rows that do not fit the boxes are an error, not a panic.
+        let bad = Subgoal {
+            ids: sub.ids.narrow(2, 0, 2),
+            ..sub
+        };
+        let e = PolicyModel::new(&cfg, &device)
+            .unwrap()
+            .predict(images, x.instruction, Some(bad))
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("J + 1 label rows"), "{e}");
     }
 
     #[test]
@@ -613,7 +692,7 @@ mod tests {
                 .unwrap()
                 .actions;
             let half = |i: usize| x.obs.pixels().unwrap().narrow(1, 4 * i, 4);
-            let sub_half = |i: usize| sub.clone().map(|s| s.narrow(1, 4 * i, 4));
+            let sub_half = |i: usize| sub.clone().map(|s| s.narrow_time(4 * i, 4));
             let (first, carry) = model
                 .predict_from(
                     half(0),
@@ -918,7 +997,7 @@ mod tests {
             x.actions = target;
             x.subgoal = variant
                 .ends_with("oracle")
-                .then(|| Tensor::ones([b, t, 4, cfg.text.max_len], &device));
+                .then(|| Tensor::ones([b, t, 4, cfg.text.max_len], &device).into());
             let (_, initial, last, _) = fit_one_batch(model, &x, 300, 2e-3, 0.0);
             eprintln!("{variant}: L_act {initial} → {last}");
             assert!(last < 0.3 * initial, "{variant}: L_act {initial} → {last}");

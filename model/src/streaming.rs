@@ -10,7 +10,7 @@ use crate::encoder::Frames;
 use crate::error::{ModelError, Result};
 use crate::io::StepInput;
 use crate::policy::PolicyModel;
-use crate::variants::{Memory, Shared};
+use crate::variants::{Memory, Shared, Subgoal};
 
 /// The state carried from step to step.
 #[derive(Clone, Debug, Default)]
@@ -110,8 +110,11 @@ impl StreamingPolicy {
         image: Tensor<4>,
         subgoal: Option<Tensor<3, Int>>,
     ) -> Result<()> {
-        self.advance(Frames::Pixels(image.unsqueeze_dim(1)), subgoal)
-            .map(|_| ())
+        self.advance(
+            Frames::Pixels(image.unsqueeze_dim(1)),
+            subgoal.map(Subgoal::from),
+        )
+        .map(|_| ())
     }
 
     /// One step on tensors (normalised actions).
@@ -125,19 +128,24 @@ impl StreamingPolicy {
         instruction: Tensor<2, Int>,
         subgoal: Option<Tensor<3, Int>>,
     ) -> Result<Tensor<2>> {
-        self.act_frames(Frames::Pixels(image.unsqueeze_dim(1)), instruction, subgoal)
+        self.act_frames(
+            Frames::Pixels(image.unsqueeze_dim(1)),
+            instruction,
+            subgoal.map(Subgoal::from),
+        )
     }
 
     /// One step on an observation of one frame (pixels or state; normalised actions).
     ///
     /// # Shapes
     /// - obs: `[1, 1, …]` (see [`Frames`]); instruction: `[1, L_txt]`; subgoal: `[1, G, L_sg]`
+    ///   (see [`Subgoal`])
     /// - output: `[H_a, A]`
     pub fn act_frames(
         &mut self,
         obs: Frames,
         instruction: Tensor<2, Int>,
-        subgoal: Option<Tensor<3, Int>>,
+        subgoal: Option<Subgoal<3>>,
     ) -> Result<Tensor<2>> {
         let visual = self.advance(obs, subgoal)?;
         let out = self.model.decode(visual, None, instruction);
@@ -150,7 +158,7 @@ impl StreamingPolicy {
     /// # Shapes
     /// - obs: `[1, 1, …]` (see [`Frames`]); subgoal: `[1, G, L_sg]`
     /// - output: the decoder's visual tokens `[1, V, D_dec]` (history included)
-    fn advance(&mut self, obs: Frames, subgoal: Option<Tensor<3, Int>>) -> Result<Tensor<3>> {
+    fn advance(&mut self, obs: Frames, subgoal: Option<Subgoal<3>>) -> Result<Tensor<3>> {
         let m = &self.model;
         if obs.batch_time() != [1, 1] {
             return Err(ModelError::Input(format!(

@@ -18,6 +18,7 @@ use crate::config::{ModelConfig, Observation, TextConfig};
 use crate::encoder::Frames;
 use crate::error::{ModelError, Result};
 use crate::policy::WindowBatch;
+use crate::variants::Subgoal;
 use state::{FEATURES, StateSpec};
 
 /// Format tag of `processor.json`.
@@ -75,6 +76,10 @@ pub enum SubgoalInput {
     /// its ordinal (`"two: bowl 1 on plate 1"`, `"0"` before any), the robot's latest overall
     /// (state mode, where slot k is object token k).
     PerObject,
+    /// The same per-object labels with the objects' boxes in the frame (pixels): the model
+    /// gives each label to the slot whose attention mask matches the object's box (Hungarian
+    /// matching, [`crate::matching`]), `"0"` to the other slots.
+    Matched,
 }
 
 impl SubgoalInput {
@@ -83,8 +88,15 @@ impl SubgoalInput {
         match (model.variant.needs_subgoal_text(), &model.observation) {
             (false, _) => SubgoalInput::None,
             (true, Observation::State { .. }) => SubgoalInput::PerObject,
-            (true, Observation::Pixels) => SubgoalInput::Pending,
+            (true, Observation::Pixels) => SubgoalInput::Matched,
         }
+    }
+
+    /// Whether a processor that prepares `self` feeds a model that reads `wanted`: the same
+    /// input, or the pending text of a pixel run saved before the labels were matched to slots
+    /// (it keeps reading what it was trained on).
+    fn feeds(self, wanted: SubgoalInput) -> bool {
+        self == wanted || (self == SubgoalInput::Pending && wanted == SubgoalInput::Matched)
     }
 }
 
@@ -134,8 +146,9 @@ pub struct StepInput {
     pub obs: Frames,
     /// Instruction ids `[1, L_txt]`.
     pub instruction: Tensor<2, Int>,
-    /// Subgoal ids `[1, G, L_sg]` (None when the model reads none).
-    pub subgoal: Option<Tensor<3, Int>>,
+    /// Subgoal ids `[1, G, L_sg]` and, matched to slots, the objects' boxes `[1, J, 4]` (see
+    /// [`Subgoal`]; None when the model reads none).
+    pub subgoal: Option<Subgoal<3>>,
 }
 
 /// The policy's pre- and post-processing (see the module docs).
@@ -153,11 +166,7 @@ impl Processor {
     }
 
     fn config_of(model: &ModelConfig, action: ActionNorm) -> ProcessorConfig {
-        let subgoal = match SubgoalInput::of(model) {
-            // (a pixel processor; `with_state` sets the spec that per-object labels need)
-            SubgoalInput::PerObject if !model.observation.is_state() => SubgoalInput::Pending,
-            s => s,
-        };
+        let subgoal = SubgoalInput::of(model);
         ProcessorConfig {
             format: PROCESSOR_FORMAT.into(),
             image_size: model.image_size,
@@ -223,6 +232,12 @@ impl Processor {
         self.config.state.is_some()
     }
 
+    /// Whether the model reads the objects' boxes and labels of every frame (pixels with the
+    /// oracle labels matched to slots): the evaluator must then render the segmentation.
+    pub fn reads_boxes(&self) -> bool {
+        self.config.subgoal == SubgoalInput::Matched
+    }
+
     /// Whether `model` reads inputs the way this processor prepares them.
     pub fn check_model(&self, model: &ModelConfig) -> Result<()> {
         let c = &self.config;
@@ -245,7 +260,7 @@ impl Processor {
         }
         if c.image_size != model.image_size
             || c.text != model.text
-            || c.subgoal != SubgoalInput::of(model)
+            || !c.subgoal.feeds(SubgoalInput::of(model))
         {
             return Err(ModelError::Config(format!(
                 "the processor (image {:?}, {} words, subgoal {:?}) does not fit the `{}` model \
@@ -266,7 +281,7 @@ impl Processor {
     /// reads none; the empty text when the goal is unknown or complete).
     pub fn subgoal_text<'g>(&self, goal: Option<&'g GoalProgress>) -> Option<&'g str> {
         match self.config.subgoal {
-            SubgoalInput::None | SubgoalInput::PerObject => None,
+            SubgoalInput::None | SubgoalInput::PerObject | SubgoalInput::Matched => None,
             SubgoalInput::Pending => Some(goal.map_or("", |g| g.current_subgoal.as_str())),
         }
     }
@@ -314,7 +329,8 @@ impl Processor {
     /// Model inputs of one environment step.
     ///
     /// # Shapes
-    /// - output: image `[1, 3, H, W]`, instruction `[1, L_txt]`, subgoal `[1, 1, L_sg]`
+    /// - output: image `[1, 3, H, W]`, instruction `[1, L_txt]`, subgoal `[1, G, L_sg]`
+    ///   (G = 1 pending text, N state tokens' labels, or J + 1 with boxes `[1, J, 4]`)
     pub fn step(&self, obs: &StepObservation, device: &Device) -> Result<StepInput> {
         let instruction = self.tokenizer.encode_batch(&[obs.instruction], device);
         if self.reads_state() {
@@ -326,6 +342,7 @@ impl Processor {
                 self.tokenizer
                     .encode_batch(&labels, device)
                     .reshape([1, n, l])
+                    .into()
             });
             return Ok(StepInput {
                 obs: Frames::State(
@@ -341,11 +358,25 @@ impl Processor {
             ModelError::Input("the model reads pixels but no frame was rendered".into())
         })?;
         let image = Tensor::from_data(TensorData::new(self.frame(frame)?, [1, 1, 3, h, w]), device);
-        let subgoal = self.subgoal_text(obs.goal).map(|s| {
-            self.tokenizer
-                .encode_batch(&[s], device)
-                .unsqueeze_dim::<3>(1)
-        });
+        let subgoal = if self.reads_boxes() {
+            let j = obs.objects.len().max(1);
+            let (labels, boxes) = object_labels(obs.objects, j);
+            Some(Subgoal {
+                ids: self.tokenizer.encode_batch(&labels, device).reshape([
+                    1,
+                    j + 1,
+                    self.config.text.max_len,
+                ]),
+                boxes: Some(Tensor::from_data(TensorData::new(boxes, [1, j, 4]), device)),
+            })
+        } else {
+            self.subgoal_text(obs.goal).map(|s| {
+                self.tokenizer
+                    .encode_batch(&[s], device)
+                    .unsqueeze_dim::<3>(1)
+                    .into()
+            })
+        };
         Ok(StepInput {
             obs: Frames::Pixels(image),
             instruction,
@@ -358,7 +389,8 @@ impl Processor {
     ///
     /// # Shapes
     /// - output: images `[B, T, 3, H, W]`, actions `[B, T, H_a, 7]`, frame mask `[B, T]`,
-    ///   action mask `[B, T, H_a, 7]`, instruction `[B, L_txt]`, subgoal `[B, T, 1, L_sg]`
+    ///   action mask `[B, T, H_a, 7]`, instruction `[B, L_txt]`, subgoal `[B, T, G, L_sg]`
+    ///   (as in [`Processor::step`]; with boxes `[B, T, J, 4]`, J the most objects of a frame)
     pub fn batch(&self, samples: &[WindowSample], device: &Device) -> Result<WindowBatch> {
         let first = samples
             .first()
@@ -455,8 +487,35 @@ impl Processor {
                 Some(
                     self.tokenizer
                         .encode_batch(&texts, device)
-                        .reshape([b, t, n, l]),
+                        .reshape([b, t, n, l])
+                        .into(),
                 )
+            }
+            SubgoalInput::Matched => {
+                // Every frame padded to the most objects of the batch (unseen, "0").
+                let j = samples
+                    .iter()
+                    .flat_map(|s| s.objects.iter().map(Vec::len))
+                    .max()
+                    .unwrap_or(0)
+                    .max(1);
+                let mut texts = Vec::with_capacity(b * t * (j + 1));
+                let mut boxes = Vec::with_capacity(b * t * j * 4);
+                for objects in samples.iter().flat_map(|s| &s.objects) {
+                    let (l, x) = object_labels(objects, j);
+                    texts.extend(l);
+                    boxes.extend(x);
+                }
+                Some(Subgoal {
+                    ids: self
+                        .tokenizer
+                        .encode_batch(&texts, device)
+                        .reshape([b, t, j + 1, l]),
+                    boxes: Some(Tensor::from_data(
+                        TensorData::new(boxes, [b, t, j, 4]),
+                        device,
+                    )),
+                })
             }
             SubgoalInput::Pending => {
                 let texts: Vec<&str> = samples
@@ -476,7 +535,8 @@ impl Processor {
                 Some(
                     self.tokenizer
                         .encode_batch(&texts, device)
-                        .reshape([b, t, 1, l]),
+                        .reshape([b, t, 1, l])
+                        .into(),
                 )
             }
         };
@@ -498,6 +558,22 @@ impl Processor {
     pub fn unnormalize(&self, a: [f32; 7]) -> [f32; 7] {
         self.config.action.denormalize(&a)
     }
+}
+
+/// The oracle labels and boxes of one frame's objects for slot matching, padded to `j`
+/// objects: `j` labels then the `"0"` label, and `j` boxes `[x, y, w, h]` (zero when unseen).
+fn object_labels(objects: &[ObjectAnnotation], j: usize) -> (Vec<&str>, Vec<f32>) {
+    let mut labels = Vec::with_capacity(j + 1);
+    let mut boxes = Vec::with_capacity(j * 4);
+    for o in objects.iter().take(j) {
+        labels.push(o.subgoal_label.as_str());
+        boxes.extend(if o.visible { o.bbox } else { [0.0; 4] });
+    }
+    // Padding objects (unseen, "0"), then the "0" row of the unmatched slots.
+    let pad = j - objects.len().min(j);
+    labels.extend(std::iter::repeat_n("0", pad + 1));
+    boxes.resize(j * 4, 0.0);
+    (labels, boxes)
 }
 
 #[cfg(test)]
@@ -560,14 +636,24 @@ pub(crate) mod tests {
         let model = ModelConfig::tiny(Variant::from_name("e_slotssm_oracle").unwrap())
             .with_vocab_from(["put the bowl on the plate"]);
         let p = Processor::new(&model, norm());
-        assert_eq!(p.config().subgoal, SubgoalInput::Pending);
+        assert_eq!(p.config().subgoal, SubgoalInput::Matched);
+        assert!(p.reads_boxes());
         let json = serde_json::to_string(p.config()).unwrap();
+        assert!(json.contains(r#""subgoal":"matched""#), "{json}");
         let back = Processor::from_config(serde_json::from_str(&json).unwrap()).unwrap();
         assert_eq!(back.config(), p.config());
         back.check_model(&model).unwrap();
         let other = ModelConfig::tiny(Variant::from_name("e_slotssm").unwrap())
             .with_vocab_from(["put the bowl on the plate"]);
         assert!(back.check_model(&other).is_err());
+        // A pixel run saved before the labels were matched to slots keeps its pending text.
+        let old = Processor::from_config(ProcessorConfig {
+            subgoal: SubgoalInput::Pending,
+            ..p.config().clone()
+        })
+        .unwrap();
+        old.check_model(&model).unwrap();
+        assert!(!old.reads_boxes());
         let mut bad = p.config().clone();
         bad.image_size = [64, 32];
         assert!(Processor::from_config(bad).is_err());
@@ -591,10 +677,81 @@ pub(crate) mod tests {
             &ModelConfig::tiny(Variant::from_name("e_slotssm_oracle").unwrap()),
             norm(),
         );
+        // Pixels: per-object labels matched to slots, no shared text.
+        assert_eq!(oracle.subgoal_text(Some(&goal)), None);
+        let pending = Processor::from_config(ProcessorConfig {
+            subgoal: SubgoalInput::Pending,
+            ..oracle.config().clone()
+        })
+        .unwrap();
         assert_eq!(
-            oracle.subgoal_text(Some(&goal)),
+            pending.subgoal_text(Some(&goal)),
             Some("put the bowl on the plate")
         );
-        assert_eq!(oracle.subgoal_text(None), Some(""));
+        assert_eq!(pending.subgoal_text(None), Some(""));
+    }
+
+    #[test]
+    fn a_pixel_oracle_step_gives_each_objects_label_and_box_then_zero() {
+        let device = Device::flex();
+        let mut model = ModelConfig::tiny(Variant::from_name("e_slotssm_oracle").unwrap());
+        model.text = cfg();
+        let p = Processor::new(&model, norm());
+        let object = |label: &str, bbox: [f32; 4], visible: bool| ObjectAnnotation {
+            instance_id: 1,
+            name: "bowl_1".into(),
+            bbox,
+            visible,
+            subgoal_label: label.into(),
+            pose: None,
+            grasped: None,
+        };
+        let objects = [
+            object("bowl on plate", [0.25, 0.5, 0.125, 0.25], true),
+            // Unseen: its box is zeroed whatever was recorded.
+            object("0", [0.5, 0.5, 0.1, 0.1], false),
+        ];
+        let [h, w] = model.image_size;
+        let frame = RgbImage {
+            width: w as u32,
+            height: h as u32,
+            channels: 3,
+            data: vec![0; h * w * 3],
+        };
+        let input = p
+            .step(
+                &StepObservation {
+                    agentview: Some(&frame),
+                    state: [0.0; 8],
+                    objects: &objects,
+                    seed: 0,
+                    instruction: "put the bowl on the plate",
+                    goal: None,
+                },
+                &device,
+            )
+            .unwrap();
+        let sub = input.subgoal.unwrap();
+        assert_eq!(sub.ids.dims(), [1, 3, 6]);
+        let ids = sub
+            .ids
+            .into_data()
+            .convert::<i64>()
+            .try_to_vec::<i64>()
+            .unwrap();
+        let tok = Tokenizer::new(&cfg());
+        let want = [
+            tok.encode("bowl on plate"),
+            tok.encode("0"),
+            tok.encode("0"),
+        ]
+        .concat();
+        assert_eq!(ids, want);
+        let boxes = sub.boxes.unwrap();
+        assert_eq!(boxes.dims(), [1, 2, 4]);
+        assert_eq!(
+            boxes.into_data().try_to_vec::<f32>().unwrap(),
+            vec![0.25, 0.5, 0.125, 0.25, 0.0, 0.0, 0.0, 0.0]
+        );
     }
 }

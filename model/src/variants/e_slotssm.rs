@@ -8,7 +8,7 @@ use burn::prelude::*;
 use burn::tensor::Distribution;
 
 use super::slots::SlotCore;
-use super::types::{Carry, Memory, Shared, WindowParts, WindowTokens};
+use super::types::{Carry, Memory, Shared, Subgoal, WindowParts, WindowTokens};
 use crate::config::ModelConfig;
 use crate::error::{ModelError, Result};
 use crate::heads::{SlotFusion, WindowHead};
@@ -101,6 +101,36 @@ impl SlotSsmTokens {
         }
     }
 
+    /// The subgoal ids of N frames as the slots read them, `[N, G, L_sg]` with G ∈ {1, K}: with
+    /// object boxes, each slot gets the label of the object its mask is matched to
+    /// ([`crate::matching`]) and the others the `"0"` row.
+    ///
+    /// # Shapes
+    /// - subgoal: ids `[N, G, L_sg]` (with boxes `[N, J, 4]`: G = J + 1); masks: `[N, K, M]`
+    fn slot_ids(&self, subgoal: Subgoal<3>, masks: &Tensor<3>) -> Result<Tensor<3, Int>> {
+        let Some(boxes) = subgoal.boxes else {
+            return Ok(subgoal.ids);
+        };
+        let [n, g, _] = subgoal.ids.dims();
+        let [n2, j, _] = boxes.dims();
+        if n2 != n || g != j + 1 {
+            return Err(ModelError::Input(format!(
+                "subgoal ids {:?} with object boxes {:?}: expected J + 1 label rows for J boxes",
+                subgoal.ids.dims(),
+                boxes.dims()
+            )));
+        }
+        let [_, _, m] = masks.dims();
+        let side = m.isqrt();
+        if side * side != m {
+            return Err(ModelError::Input(format!(
+                "slot masks over {m} tokens are not a square grid: cannot match them to boxes"
+            )));
+        }
+        let rows = crate::matching::label_rows(masks.clone(), boxes, [side, side])?;
+        Ok(crate::matching::gather_labels(subgoal.ids, rows))
+    }
+
     fn check_state(&self, state: &SlotSsmState, b: usize, device: &Device) -> Result<()> {
         let k = self.core.num_slots();
         let want = self.slot_ssm.zero_state(b, k, device);
@@ -120,11 +150,11 @@ impl SlotSsmTokens {
     }
 
     /// # Shapes
-    /// - feats: `[B, T, M, D_f]`; subgoal: `[B, T, G, L_sg]`; output: see [`WindowTokens`]
+    /// - feats: `[B, T, M, D_f]`; subgoal: see [`Subgoal`]; output: see [`WindowTokens`]
     pub fn window(
         &self,
         feats: Tensor<4>,
-        subgoal: Option<Tensor<4, Int>>,
+        subgoal: Option<Subgoal<4>>,
         carry: Carry,
         shared: Shared,
     ) -> Result<WindowTokens> {
@@ -146,10 +176,13 @@ impl SlotSsmTokens {
         };
         let (pred, state) = self.slot_ssm.forward(slots.clone(), ssm_feats, state);
         let window = self.window_head.forward(pred.clone(), slots.clone());
-        let sub = subgoal.map(|s| {
-            let [_, _, g, l] = s.dims();
-            s.reshape([n, g, l])
-        });
+        let sub = match subgoal {
+            Some(s) => {
+                let [_, _, _, mm] = masks.dims();
+                Some(self.slot_ids(s.frames(), &masks.clone().reshape([n, k, mm]))?)
+            }
+            None => None,
+        };
         let g = self.subgoal_embedding(sub, n, shared, &device)?;
         let z = self.fusion.forward(
             slots.clone().reshape([n, k, d]),
@@ -175,11 +208,11 @@ impl SlotSsmTokens {
     }
 
     /// # Shapes
-    /// - feats: `[1, M, D_f]`; subgoal: `[1, G, L_sg]`; output: `[1, L + K, D_dec]`
+    /// - feats: `[1, M, D_f]`; subgoal: see [`Subgoal`]; output: `[1, L + K, D_dec]`
     pub fn step(
         &self,
         feats: Tensor<3>,
-        subgoal: Option<Tensor<3, Int>>,
+        subgoal: Option<Subgoal<3>>,
         memory: &mut Memory,
         shared: Shared,
     ) -> Result<Tensor<3>> {
@@ -193,7 +226,12 @@ impl SlotSsmTokens {
         let ssm_feats = self.cross_attention.then(|| feats.clone());
         let (pred, state) = self.slot_ssm.step(slots.clone(), ssm_feats, state);
         memory.ssm = Some(state);
-        let g = self.subgoal_embedding(subgoal, 1, shared, &device)?;
+        let sub = match (subgoal, &memory.masks) {
+            (Some(s), Some(masks)) => Some(self.slot_ids(s, masks)?),
+            (Some(s), None) => Some(s.ids),
+            (None, _) => None,
+        };
+        let g = self.subgoal_embedding(sub, 1, shared, &device)?;
         let z = self.fusion.forward(slots, pred, g);
         Ok(self.core.tokens(feats, z, shared))
     }

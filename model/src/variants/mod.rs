@@ -20,7 +20,9 @@ pub use e_slotssm::SlotSsmTokens;
 pub use history::History;
 pub use slots::{ObjectSlots, SlotCore, SlotSource};
 pub use slotvla::SlotVlaTokens;
-pub use types::{Carry, CarryRecord, Memory, Shared, TensorRecord, WindowParts, WindowTokens};
+pub use types::{
+    Carry, CarryRecord, Memory, Shared, Subgoal, TensorRecord, WindowParts, WindowTokens,
+};
 
 use crate::config::{ModelConfig, Variant};
 use crate::error::Result;
@@ -52,12 +54,12 @@ impl TokenBuilder {
     /// Decoder tokens of every frame of a window that continues from `carry`.
     ///
     /// # Shapes
-    /// - feats: `[B, T, M, D_f]`; subgoal: `[B, T, G, L_sg]`, G ∈ {1, K}
+    /// - feats: `[B, T, M, D_f]`; subgoal: see [`Subgoal`]
     /// - output: see [`WindowTokens`]
     pub fn window(
         &self,
         feats: Tensor<4>,
-        subgoal: Option<Tensor<4, Int>>,
+        subgoal: Option<Subgoal<4>>,
         carry: Carry,
         shared: Shared,
     ) -> Result<WindowTokens> {
@@ -72,12 +74,12 @@ impl TokenBuilder {
     /// updates `memory`.
     ///
     /// # Shapes
-    /// - feats: `[1, M, D_f]`; subgoal: `[1, G, L_sg]`
+    /// - feats: `[1, M, D_f]`; subgoal: see [`Subgoal`]
     /// - output: `[1, V, D_dec]`
     pub fn step(
         &self,
         feats: Tensor<3>,
-        subgoal: Option<Tensor<3, Int>>,
+        subgoal: Option<Subgoal<3>>,
         memory: &mut Memory,
         shared: Shared,
     ) -> Result<Tensor<3>> {

@@ -43,6 +43,47 @@ impl Carry {
     }
 }
 
+/// The oracle subgoal as token ids, and how its rows reach the slots. `R` = 4 for windows
+/// (`[B, T, …]`), 3 for one streamed step (`[1, …]`).
+#[derive(Clone, Debug)]
+pub struct Subgoal<const R: usize> {
+    /// Token ids `[…, G, L_sg]`: G = 1 (shared by every slot) or K (slot k reads row k); with
+    /// `boxes`, G = J + 1: J objects' labels, then the `"0"` label.
+    pub ids: Tensor<R, Int>,
+    /// Object boxes `[…, J, 4]` (`[x, y, w, h]` in [0, 1] of the upright frame, zero when
+    /// unseen): each slot reads the label of the object its attention mask is matched to
+    /// ([`crate::matching`]), the others row J. None: the ids are per slot or shared.
+    pub boxes: Option<Tensor<R>>,
+}
+
+impl<const R: usize> From<Tensor<R, Int>> for Subgoal<R> {
+    fn from(ids: Tensor<R, Int>) -> Self {
+        Subgoal { ids, boxes: None }
+    }
+}
+
+impl Subgoal<4> {
+    /// Frames `start..start + len` of every window.
+    pub fn narrow_time(self, start: usize, len: usize) -> Self {
+        Subgoal {
+            ids: self.ids.narrow(1, start, len),
+            boxes: self.boxes.map(|x| x.narrow(1, start, len)),
+        }
+    }
+
+    /// The rows of `[B, T, …]` flattened to `[B · T, …]`.
+    pub fn frames(self) -> Subgoal<3> {
+        let [b, t, g, l] = self.ids.dims();
+        Subgoal {
+            ids: self.ids.reshape([b * t, g, l]),
+            boxes: self.boxes.map(|x| {
+                let [b, t, j, c] = x.dims();
+                x.reshape([b * t, j, c])
+            }),
+        }
+    }
+}
+
 /// The state a streaming policy carries from step to step (reset per episode).
 #[derive(Clone, Debug, Default)]
 pub struct Memory {

@@ -128,26 +128,9 @@ impl Recorder {
             .agentview_segmentation
             .as_ref()
             .ok_or_else(|| RecordError::Setup("no segmentation".into()))?;
-        // Top-level body id → instance id (index + 1), everything else 0.
-        let ids: Vec<u16> = seg
-            .iter()
-            .map(|&b| {
-                if b < 0 {
-                    0
-                } else {
-                    scene
-                        .instances
-                        .iter()
-                        .position(|i| i.root_body == b as usize)
-                        .map_or(0, |k| k as u16 + 1)
-                }
-            })
-            .collect();
+        let ids = instance_ids(scene, seg);
         let mut objects = annotations(scene, &ids, s as usize, self.labels.labels());
-        for (o, st) in objects.iter_mut().zip(&obs.objects) {
-            o.pose = Some(st.pose());
-            o.grasped = Some(st.grasped);
-        }
+        add_poses(&mut objects, obs);
         let record = StepRecord {
             step: self.step,
             agentview: rgb(&obs.agentview_rgb)?,
@@ -183,6 +166,57 @@ impl Recorder {
     /// Closes the file under its final name. Dropping a recorder instead leaves no file behind.
     pub fn finish(self) -> Result<PathBuf, RecordError> {
         Ok(self.writer.finish()?)
+    }
+}
+
+/// The objects of a task scene as an episode records them at one observation: instance names in
+/// scene order, boxes and visibility from the agentview segmentation (zero boxes, not visible,
+/// when `obs` has none), poses and grasps, and the given oracle labels (`"0"` where `labels` has
+/// none). The recorder and the evaluator's input path both build them here.
+pub fn object_annotations(
+    env: &Env,
+    obs: &Observation,
+    labels: &[String],
+) -> Vec<ObjectAnnotation> {
+    let Some(scene) = env.scene() else {
+        return Vec::new();
+    };
+    let n = scene.instances.len();
+    let labels: Vec<String> = (0..n)
+        .map(|k| labels.get(k).cloned().unwrap_or_else(|| "0".into()))
+        .collect();
+    let s = obs.image_size;
+    let ids = match &obs.agentview_segmentation {
+        Some(seg) if s > 0 && seg.len() == s * s => instance_ids(scene, seg),
+        _ => Vec::new(),
+    };
+    let mut objects = annotations(scene, &ids, s.max(1), &labels);
+    add_poses(&mut objects, obs);
+    objects
+}
+
+/// Top-level body id map → instance id map (index + 1; 0 for everything else).
+fn instance_ids(scene: &crate::world::scene::Scene, seg: &[i32]) -> Vec<u16> {
+    seg.iter()
+        .map(|&b| {
+            if b < 0 {
+                0
+            } else {
+                scene
+                    .instances
+                    .iter()
+                    .position(|i| i.root_body == b as usize)
+                    .map_or(0, |k| k as u16 + 1)
+            }
+        })
+        .collect()
+}
+
+/// The observed poses and grasps of the objects (scene order).
+fn add_poses(objects: &mut [ObjectAnnotation], obs: &Observation) {
+    for (o, st) in objects.iter_mut().zip(&obs.objects) {
+        o.pose = Some(st.pose());
+        o.grasped = Some(st.grasped);
     }
 }
 
