@@ -46,13 +46,13 @@ fn replay(obs: train::config::ObsMode) {
     cfg.data.augment = false;
     let vocab = train::dataset::RunData::model_vocab(&index).unwrap();
     let mut mcfg = cfg.model_config(vocab).unwrap();
-    let opened = data::window::open_all(&data_dir, &index).unwrap();
+    let opened = data::OpenedDataset::from_index(&data_dir, index).unwrap();
     let spec = (obs == train::config::ObsMode::State)
-        .then(|| train::dataset::state_spec(&data_dir, &index, &opened).unwrap());
+        .then(|| train::dataset::state_spec(&opened).unwrap());
     if let Some(s) = &spec {
         mcfg = mcfg.with_state(s.tokens(), s.num_categories());
     }
-    let run_data = train::dataset::RunData::open(&cfg, &mcfg, spec, index, &opened).unwrap();
+    let run_data = train::dataset::RunData::open(&cfg, &mcfg, spec, &opened).unwrap();
     let device = Device::flex();
     let w = cfg.window_len();
 

@@ -57,7 +57,7 @@ pub use imageio::{Flip, ImageCompression};
 pub use index::{DatasetIndex, EpisodeEntry, IndexOptions, Split, build_index};
 pub use schema::*;
 pub use text::Vocab;
-pub use window::{ActionNorm, Augment, WindowConfig, WindowDataset, WindowSample};
+pub use window::{ActionNorm, Augment, OpenedDataset, WindowConfig, WindowDataset, WindowSample};
 
 /// Burn `Dataset`/`Batcher` adapters (feature `burn`).
 #[cfg(feature = "burn")]

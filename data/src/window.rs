@@ -5,7 +5,7 @@
 //! Decoding is lazy (only when a sample is asked for) and parallel (rayon); every distinct frame
 //! of a window is decoded once.
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use std::sync::atomic::{AtomicU64, Ordering};
 
@@ -203,11 +203,45 @@ fn mix(mut z: u64) -> u64 {
     z ^ (z >> 31)
 }
 
-/// Every episode of `index` in dataset `dir`, opened and checked ([`crate::EpisodeEntry::open`]:
-/// size, CRC-32, structure) in parallel, in index order; the first bad one (in index order) is
-/// the error.
-pub fn open_all(dir: &Path, index: &DatasetIndex) -> Result<Vec<Arc<EpisodeReader>>> {
-    open_each(dir, &index.episodes.iter().collect::<Vec<_>>())
+/// A dataset directory with its index and every episode opened and checked once
+/// ([`crate::EpisodeEntry::open`]: size, CRC-32, structure), so that a training run's checks and
+/// both splits' windows share one read of each file.
+#[derive(Clone, Debug)]
+pub struct OpenedDataset {
+    /// The dataset directory.
+    pub dir: PathBuf,
+    /// Its index.
+    pub index: DatasetIndex,
+    readers: Vec<Arc<EpisodeReader>>,
+}
+
+impl OpenedDataset {
+    /// Loads `dir/index.json` and opens every episode ([`OpenedDataset::from_index`]).
+    pub fn open(dir: impl AsRef<Path>) -> Result<Self> {
+        let dir = dir.as_ref();
+        Self::from_index(dir, DatasetIndex::load(dir)?)
+    }
+
+    /// Opens every episode of `index` in `dir` in parallel; the first bad one in index order is
+    /// the error, whatever order the threads read in.
+    pub fn from_index(dir: &Path, index: DatasetIndex) -> Result<Self> {
+        let readers = open_each(dir, &index.episodes.iter().collect::<Vec<_>>())?;
+        Ok(OpenedDataset {
+            dir: dir.to_path_buf(),
+            index,
+            readers,
+        })
+    }
+
+    /// Every episode in index order: its index entry, its file's path and its reader.
+    pub fn episodes(&self) -> Vec<(&crate::EpisodeEntry, PathBuf, &Arc<EpisodeReader>)> {
+        self.index
+            .episodes
+            .iter()
+            .zip(&self.readers)
+            .map(|(e, r)| (e, self.dir.join(&e.file), r))
+            .collect()
+    }
 }
 
 /// `entries` opened in parallel ([`crate::EpisodeEntry::open`]), in their order; the first bad
@@ -251,29 +285,17 @@ impl WindowDataset {
         Self::with_readers(index, readers, cfg)
     }
 
-    /// Like [`WindowDataset::from_index`] on episodes opened already: `opened` holds every
-    /// episode of `index` in index order (as [`open_all`] returns them), so both splits and other
+    /// Like [`WindowDataset::from_index`] on a dataset opened already: both splits and other
     /// passes over the data share one read and one check of each file.
-    pub fn from_opened(
-        index: &DatasetIndex,
-        opened: &[Arc<EpisodeReader>],
-        split: Split,
-        cfg: WindowConfig,
-    ) -> Result<Self> {
+    pub fn from_opened(data: &OpenedDataset, split: Split, cfg: WindowConfig) -> Result<Self> {
         check_config(&cfg)?;
-        if opened.len() != index.episodes.len() {
-            return Err(DataError::Argument(format!(
-                "{} opened episodes for an index of {}",
-                opened.len(),
-                index.episodes.len()
-            )));
-        }
-        let readers = index
+        let readers = data
+            .index
             .split(split)
             .into_iter()
-            .map(|(i, _)| (i, opened[i].clone()))
+            .map(|(i, _)| (i, data.readers[i].clone()))
             .collect();
-        Self::with_readers(index, readers, cfg)
+        Self::with_readers(&data.index, readers, cfg)
     }
 
     fn with_readers(

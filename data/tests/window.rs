@@ -281,11 +281,11 @@ fn chunks_walk_an_episode_and_mask_past_its_end() {
     );
 }
 
-/// Episodes opened once ([`data::window::open_all`]) give the same windows as each split opening
-/// its own; a list of another length is refused, and the first damaged file in index order is
-/// the error whatever order the threads read in.
+/// A dataset opened once ([`data::OpenedDataset`]) gives the same windows as each split
+/// opening its own, and the first damaged file in index order is the error whatever order the
+/// threads read in.
 #[test]
-fn windows_of_episodes_opened_once_equal_windows_of_the_split() {
+fn windows_of_a_dataset_opened_once_equal_windows_of_the_split() {
     let (dir, _) = dataset(&[6, 9, 4, 7]);
     let index = DatasetIndex::load(dir.path()).unwrap();
     let cfg = WindowConfig {
@@ -295,27 +295,30 @@ fn windows_of_episodes_opened_once_equal_windows_of_the_split() {
         image_size: 8,
         ..Default::default()
     };
-    let opened = data::window::open_all(dir.path(), &index).unwrap();
-    assert_eq!(opened.len(), 4);
-    let a = WindowDataset::from_opened(&index, &opened, Split::Train, cfg.clone()).unwrap();
+    let opened = data::OpenedDataset::open(dir.path()).unwrap();
+    assert_eq!(opened.index, index);
+    let files: Vec<_> = opened
+        .episodes()
+        .into_iter()
+        .map(|(_, p, r)| (p, r.len()))
+        .collect();
+    assert_eq!(files.len(), 4);
+    assert_eq!(files[1].0, dir.path().join(&index.episodes[1].file));
+    assert_eq!(files.iter().map(|f| f.1).collect::<Vec<_>>(), [6, 9, 4, 7]);
+    let a = WindowDataset::from_opened(&opened, Split::Train, cfg.clone()).unwrap();
     let b = WindowDataset::from_index(dir.path(), &index, Split::Train, cfg.clone()).unwrap();
     assert_eq!(a.len(), 26);
     assert_eq!(a.len(), b.len());
     for k in 0..a.len() {
         assert_eq!(a.get(k).unwrap(), b.get(k).unwrap(), "sample {k}");
     }
-    let short = WindowDataset::from_opened(&index, &opened[..3], Split::Train, cfg).err();
-    assert_eq!(
-        short.map(|e| e.to_string()).as_deref(),
-        Some("invalid argument: 3 opened episodes for an index of 4")
-    );
     // Damage the second and the fourth episode: the second is named.
     for e in [&index.episodes[1], &index.episodes[3]] {
         let p = dir.path().join(&e.file);
         let bytes = std::fs::read(&p).unwrap();
         std::fs::write(&p, &bytes[..bytes.len() / 2]).unwrap();
     }
-    let err = data::window::open_all(dir.path(), &index)
+    let err = data::OpenedDataset::open(dir.path())
         .unwrap_err()
         .to_string();
     assert!(err.contains(&index.episodes[1].file), "{err}");

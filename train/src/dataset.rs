@@ -5,10 +5,9 @@
 
 #[cfg(feature = "generate")]
 use std::path::Path;
-use std::sync::Arc;
 
 use burn::prelude::*;
-use data::{DatasetIndex, EpisodeReader, Split, WindowConfig, WindowDataset};
+use data::{DatasetIndex, OpenedDataset, Split, WindowConfig, WindowDataset};
 #[cfg(feature = "generate")]
 use indicatif::{ProgressBar, ProgressStyle};
 use model::Processor;
@@ -139,15 +138,14 @@ impl RunData {
     /// Opens `[data].dir` for a model of `model` (image size, text length; in state mode the
     /// object-state spec it was built for, see [`state_spec`]).
     ///
-    /// `index` is the dataset's index and `opened` every episode of it in index order
-    /// ([`data::window::open_all`]).
+    /// `data` is `[data].dir` with every episode opened ([`data::OpenedDataset`]).
     pub fn open(
         cfg: &Config,
         model: &model::ModelConfig,
         state: Option<StateSpec>,
-        index: DatasetIndex,
-        opened: &[Arc<EpisodeReader>],
+        data: &OpenedDataset,
     ) -> Result<Self> {
+        let index = data.index.clone();
         let [h, w] = model.image_size;
         if h != w {
             return Err(TrainError::Usage(format!(
@@ -165,7 +163,7 @@ impl RunData {
             augment: cfg.data.augment.then(data::Augment::default),
             seed: cfg.train.seed,
         };
-        let train = WindowDataset::from_opened(&index, opened, Split::Train, win.clone())?;
+        let train = WindowDataset::from_opened(data, Split::Train, win.clone())?;
         if train.is_empty() {
             return Err(TrainError::Usage(format!(
                 "dataset {}: the train split is empty",
@@ -179,12 +177,7 @@ impl RunData {
         let val = if index.split(Split::Val).is_empty() {
             None
         } else {
-            Some(WindowDataset::from_opened(
-                &index,
-                opened,
-                Split::Val,
-                val_win,
-            )?)
+            Some(WindowDataset::from_opened(data, Split::Val, val_win)?)
         };
         let processor = match state {
             None => Processor::new(model, train.action_norm().clone()),
@@ -387,19 +380,12 @@ impl EpisodeSampler {
 /// every 4th frame of the training episodes. Every episode must have been recorded with object
 /// poses (episode schema 2); the first that was not is named in the error.
 ///
-/// `opened` holds every episode of `index`, in index order ([`data::window::open_all`]).
-pub fn state_spec(
-    dir: &Path,
-    index: &DatasetIndex,
-    opened: &[Arc<EpisodeReader>],
-) -> Result<StateSpec> {
+pub fn state_spec(data: &OpenedDataset) -> Result<StateSpec> {
     use rayon::prelude::*;
-    let stats = index
-        .episodes
-        .par_iter()
-        .zip(opened)
-        .map(|(e, r)| -> Result<StateStats> {
-            let path = dir.join(&e.file);
+    let stats = data
+        .episodes()
+        .into_par_iter()
+        .map(|(e, path, r)| -> Result<StateStats> {
             let steps = r.read_raw_steps(0..r.len())?;
             let missing = || {
                 TrainError::Usage(format!(
@@ -436,10 +422,8 @@ pub fn state_spec(
 /// Checks that every episode of the dataset records its goal progress (`/goal` with a known
 /// goal length), which an oracle variant reads; the first that does not (e.g. imported from
 /// RLDS, which has no subgoals) is named in the error.
-/// `opened` as in [`state_spec`].
-pub fn check_goals(dir: &Path, index: &DatasetIndex, opened: &[Arc<EpisodeReader>]) -> Result<()> {
-    for (e, r) in index.episodes.iter().zip(opened) {
-        let path = dir.join(&e.file);
+pub fn check_goals(data: &OpenedDataset) -> Result<()> {
+    for (_, path, r) in data.episodes() {
         let has_channel = r
             .channels()
             .iter()

@@ -236,25 +236,24 @@ pub fn train(cfg: &Config, opts: &TrainOptions) -> Result<TrainSummary> {
     let ad = device.clone().autodiff();
 
     ensure_dataset(&cfg, opts.progress)?;
-    let index = data::DatasetIndex::load(&cfg.data.dir)?;
-    let vocab = RunData::model_vocab(&index)?;
-    let mut mcfg: ModelConfig = cfg.model_config(vocab).map_err(|m| config_error(&cfg, m))?;
     // Every episode read and checked once, for the checks below and both splits' windows.
-    let opened = data::window::open_all(&cfg.data.dir, &index)?;
+    let opened = data::OpenedDataset::open(&cfg.data.dir)?;
+    let vocab = RunData::model_vocab(&opened.index)?;
+    let mut mcfg: ModelConfig = cfg.model_config(vocab).map_err(|m| config_error(&cfg, m))?;
     if mcfg.variant.needs_subgoal_text() {
-        crate::dataset::check_goals(&cfg.data.dir, &index, &opened)?;
+        crate::dataset::check_goals(&opened)?;
     }
     let state = match cfg.model.obs {
         ObsMode::Pixels => None,
         ObsMode::State => {
-            let spec = crate::dataset::state_spec(&cfg.data.dir, &index, &opened)?;
+            let spec = crate::dataset::state_spec(&opened)?;
             mcfg = mcfg.with_state(spec.tokens(), spec.num_categories());
             mcfg.validate()
                 .map_err(|e| config_error(&cfg, e.to_string()))?;
             Some(spec)
         }
     };
-    let data = RunData::open(&cfg, &mcfg, state, index, &opened)?;
+    let data = RunData::open(&cfg, &mcfg, state, &opened)?;
 
     std::fs::create_dir_all(&run).map_err(|e| TrainError::io(&run, e))?;
     checkpoint::clean_temporaries(&run)?;
