@@ -151,7 +151,8 @@ impl ModelPolicy {
                 None => self.labels = LabelTracker::new(env),
             }
             let labels = self.labels.as_ref().map_or(&[][..], LabelTracker::labels);
-            object_annotations(env, obs, labels)
+            // The recorder's own annotations (boxes from the segmentation when rendered).
+            sim::record::object_annotations(env, obs, labels)
         } else {
             Vec::new()
         };
@@ -169,17 +170,6 @@ impl ModelPolicy {
     pub fn uses_oracle_subgoal(&self) -> bool {
         self.processor.config().subgoal != model::io::SubgoalInput::None
     }
-}
-
-/// The objects of a task scene as the episode files record them: instance names in scene order,
-/// boxes from the segmentation (when rendered), the observed poses and grasps, and the given
-/// oracle labels ([`sim::record::object_annotations`], the recorder's own code).
-pub fn object_annotations(
-    env: &Env,
-    obs: &Observation,
-    labels: &[String],
-) -> Vec<ObjectAnnotation> {
-    sim::record::object_annotations(env, obs, labels)
 }
 
 /// Eval's input path: one simulator observation → the model's inputs, through `processor`

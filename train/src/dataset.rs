@@ -379,7 +379,6 @@ impl EpisodeSampler {
 /// episode, the most objects in one scene, and the standardisation of the token features over
 /// every 4th frame of the training episodes. Every episode must have been recorded with object
 /// poses (episode schema 2); the first that was not is named in the error.
-///
 pub fn state_spec(data: &OpenedDataset) -> Result<StateSpec> {
     use rayon::prelude::*;
     let stats = data
