@@ -5,11 +5,13 @@
 //! intervals — as Markdown, JSON, CSV and an SVG plot.
 //!
 //! Every finished step is kept on disk (the run's checkpoints, its `eval/results.json`), so an
-//! interrupted experiment continues where it stopped.
+//! interrupted experiment continues where it stopped; every evaluated run is also recorded in
+//! `OUT/runs.json` ([`Ledger`]), so a clone without the run directories rebuilds the same tables
+//! and trains only what is missing.
 //!
 //! ```toml
 //! name = "paper"
-//! out = "docs"              # results.md, results.json, results.csv, results.svg
+//! out = "docs"              # results.md, .json, .csv, .svg and the ledger runs.json
 //! episodes = 20             # per task, seeds derived from `seed`
 //! seed = 1000
 //! full_budget = true
@@ -450,7 +452,9 @@ fn variant_table(
 pub fn markdown(x: &Experiment, runs: &[RunResult], missing: &[(String, String)]) -> String {
     let mut s = format!(
         "# Results: `{}`\n\n{} held-out episodes per task (seeds from {}), {}; mean ± 95 % \
-         interval half-width (completion: normal approximation; success: Wilson).\n\n",
+         interval half-width (completion: normal approximation; success: Wilson). Every run below is \
+         also recorded in `runs.json` beside this file, from which `eval experiment` reads the runs \
+         whose directories are not on the machine (remove an entry to train and evaluate it again).\n\n",
         x.name,
         x.episodes,
         x.seed,
@@ -873,6 +877,70 @@ pub fn load_result(x: &Experiment, run: &Path, obs: &str, label: &str) -> Option
         steps,
         tasks: r.tasks,
     })
+}
+
+/// The record of every evaluated run of an experiment, written beside its tables (`OUT/runs.json`)
+/// and kept under version control with them: the tables can be rebuilt, and grown by new runs, on
+/// a machine that does not hold the run directories (a fresh clone). A run directory that holds an
+/// evaluation with the experiment's protocol always wins over its entry.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Ledger {
+    /// Episodes per task of every entry.
+    pub episodes: usize,
+    /// Base evaluation seed of every entry.
+    pub seed: u64,
+    /// Whether every entry ran the full step budget.
+    pub full_budget: bool,
+    /// One entry per evaluated run (`run` is its directory, as the plan names it).
+    pub runs: Vec<RunResult>,
+}
+
+impl Ledger {
+    /// Where an experiment keeps its ledger: `OUT/runs.json`.
+    pub fn path(x: &Experiment) -> PathBuf {
+        x.out.join("runs.json")
+    }
+
+    /// The ledger of `runs` under the experiment's protocol.
+    pub fn of(x: &Experiment, runs: &[RunResult]) -> Ledger {
+        Ledger {
+            episodes: x.episodes,
+            seed: x.seed,
+            full_budget: x.full_budget,
+            runs: runs.to_vec(),
+        }
+    }
+
+    /// Reads the experiment's ledger: `None` when there is none, or when it was written under
+    /// another protocol (episodes, seed, budget), whose entries this experiment cannot use; a
+    /// file that is not a ledger is an error naming it.
+    pub fn load(x: &Experiment) -> Result<Option<Ledger>, EvalError> {
+        let path = Ledger::path(x);
+        let text = match std::fs::read_to_string(&path) {
+            Ok(t) => t,
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(None),
+            Err(e) => {
+                return Err(EvalError::Input {
+                    path,
+                    message: e.to_string(),
+                });
+            }
+        };
+        let l: Ledger = serde_json::from_str(&text).map_err(|e| EvalError::Input {
+            path: path.clone(),
+            message: format!("not a ledger of evaluated runs: {e}"),
+        })?;
+        let same = l.episodes == x.episodes && l.seed == x.seed && l.full_budget == x.full_budget;
+        Ok(same.then_some(l))
+    }
+
+    /// The entry of a planned run: same run directory, observation mode and label.
+    pub fn find(&self, run: &str, obs: &str, label: &str) -> Option<&RunResult> {
+        self.runs
+            .iter()
+            .find(|r| r.run == run && r.obs == obs && r.variant == label)
+    }
 }
 
 #[cfg(test)]

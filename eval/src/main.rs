@@ -61,7 +61,8 @@ enum Command {
     Experiment {
         /// Experiment file, e.g. configs/experiments/paper.toml.
         file: PathBuf,
-        /// Only rebuild the tables from the runs evaluated so far (no training, no rollouts).
+        /// Only rebuild the tables from the runs evaluated so far, in their run directories or in the
+        /// ledger OUT/runs.json (no training, no rollouts).
         #[arg(long)]
         tables_only: bool,
         /// No progress bar.
@@ -415,14 +416,36 @@ fn experiment(
             )?;
             eval::write_atomic(&x.out.join("results.csv"), exp::csv(done).as_bytes())?;
             eval::write_atomic(&x.out.join("results.svg"), exp::svg(done).as_bytes())?;
+            eval::write_atomic(
+                &exp::Ledger::path(&x),
+                serde_json::to_string_pretty(&exp::Ledger::of(&x, done))?.as_bytes(),
+            )?;
             Ok(())
         };
     let started = std::time::Instant::now();
-    // The runs evaluated already (read once).
+    // The runs evaluated already (read once): from their run directories, else from the ledger
+    // kept beside the tables (a fresh clone holds no run directories).
+    let ledger = exp::Ledger::load(&x)?;
+    let mut recorded = 0;
     let evaluated: Vec<Option<exp::RunResult>> = plan
         .iter()
-        .map(|p| exp::load_result(&x, &x.runs_dir.join(&p.name), &p.spec.obs, &p.label))
+        .map(|p| {
+            let run = x.runs_dir.join(&p.name);
+            exp::load_result(&x, &run, &p.spec.obs, &p.label).or_else(|| {
+                let r = ledger
+                    .as_ref()?
+                    .find(&run.display().to_string(), &p.spec.obs, &p.label);
+                recorded += usize::from(r.is_some());
+                r.cloned()
+            })
+        })
         .collect();
+    if recorded > 0 {
+        eprintln!(
+            "{recorded} evaluated runs read from {} (their run directories are not here)",
+            exp::Ledger::path(&x).display()
+        );
+    }
     // With --jobs N, every run still to evaluate is trained first (N at once), then evaluated.
     let pretrained = jobs > 1 && !tables_only;
     if pretrained {

@@ -259,3 +259,71 @@ fn a_closed_stdout_still_writes_the_results() {
         assert!(dir.path().join(f).is_file(), "{f} missing");
     }
 }
+
+/// On a clone without run directories, `eval experiment --tables-only` rebuilds the tables from
+/// the ledger `OUT/runs.json` and writes the same ledger back; a run the ledger lacks is listed as
+/// not trained; a ledger that is not one is exit 2 naming the file.
+#[test]
+fn experiment_tables_from_the_ledger_alone() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("docs");
+    std::fs::create_dir_all(&out).unwrap();
+    let file = dir.path().join("x.toml");
+    std::fs::write(
+        &file,
+        format!(
+            "name = \"x\"\nout = \"{}\"\nepisodes = 20\nseed = 1000\nruns_dir = \"{}\"\n\
+             [[runs]]\nobs = \"state\"\nsuite = \"t3\"\nconfig = \"configs/state/t3.toml\"\n\
+             variants = [\"e_slotssm\", \"slotvla_h1\"]\n",
+            out.display(),
+            dir.path().join("runs").display()
+        ),
+    )
+    .unwrap();
+    let run = dir.path().join("runs").join("x_state_t3_e_slotssm");
+    let ledger = serde_json::json!({
+        "episodes": 20, "seed": 1000, "full_budget": true,
+        "runs": [{
+            "obs": "state", "variant": "e_slotssm", "run": run.display().to_string(),
+            "train_s": 1500.0, "steps": 16000,
+            "tasks": [{
+                "task": "libero_mem/t3", "episodes": 20, "completion": 66.67,
+                "completion_ci95": 18.4, "success": 0.0, "success_ci95": [0.0, 16.1],
+                "mean_steps": 320.0, "over_repetition": 11
+            }]
+        }]
+    });
+    let text = serde_json::to_string_pretty(&ledger).unwrap();
+    std::fs::write(out.join("runs.json"), &text).unwrap();
+    let f = file.to_str().unwrap();
+    let (code, stdout, err) = eval(&["experiment", f, "--tables-only", "--quiet"]);
+    assert_eq!(code, 0, "{err}");
+    assert!(err.contains("1 evaluated runs read from"), "{err}");
+    assert!(stdout.contains("| e_slotssm | 67 ± 18 |"), "{stdout}");
+    assert!(
+        stdout.contains("- state mode: slotvla_h1 on t3"),
+        "{stdout}"
+    );
+    let md = std::fs::read_to_string(out.join("results.md")).unwrap();
+    assert!(md.contains("| e_slotssm | 67 ± 18 |"), "{md}");
+    let back: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("runs.json")).unwrap()).unwrap();
+    assert_eq!(back, ledger);
+    // Another protocol's ledger is not used (and the tables say the run is missing).
+    std::fs::write(
+        out.join("runs.json"),
+        text.replace("\"seed\": 1000", "\"seed\": 7"),
+    )
+    .unwrap();
+    let (code, stdout, _) = eval(&["experiment", f, "--tables-only", "--quiet"]);
+    assert_eq!(code, 0);
+    assert!(stdout.contains("- state mode: e_slotssm on t3"), "{stdout}");
+    // Garbage is one error naming the file.
+    std::fs::write(out.join("runs.json"), "{\"runs\": 3}").unwrap();
+    let (code, _, err) = eval(&["experiment", f, "--tables-only", "--quiet"]);
+    assert_eq!(code, 2, "{err}");
+    assert!(
+        err.contains("runs.json") && err.contains("not a ledger of evaluated runs"),
+        "{err}"
+    );
+}
