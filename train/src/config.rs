@@ -746,6 +746,7 @@ mod shipped {
                 "t3",
                 "t4",
                 "t5",
+                "t6",
                 "tiny"
             ]
         );
