@@ -166,6 +166,12 @@ impl Experiment {
         Ok(x)
     }
 
+    /// Whether an evaluation run with `episodes` per task from `seed` (`full_budget` or not) is one
+    /// of this experiment's: the protocol its tables compare.
+    pub fn same_protocol(&self, episodes: usize, seed: u64, full_budget: bool) -> bool {
+        episodes == self.episodes && seed == self.seed && full_budget == self.full_budget
+    }
+
     /// Every (group, variant) pair, in file order.
     pub fn plan(&self) -> Vec<Planned<'_>> {
         let mut out = Vec::new();
@@ -865,7 +871,7 @@ pub fn svg(runs: &[RunResult]) -> String {
 /// experiment's protocol).
 pub fn load_result(x: &Experiment, run: &Path, obs: &str, label: &str) -> Option<RunResult> {
     let (_, r) = Results::load(&run.join("eval")).ok()?;
-    if r.episodes_per_task != x.episodes || r.seed != x.seed || r.full_budget != x.full_budget {
+    if !x.same_protocol(r.episodes_per_task, r.seed, r.full_budget) {
         return None;
     }
     let (train_s, steps) = training_cost(run);
@@ -912,9 +918,8 @@ impl Ledger {
         }
     }
 
-    /// Reads the experiment's ledger: `None` when there is none, or when it was written under
-    /// another protocol (episodes, seed, budget), whose entries this experiment cannot use; a
-    /// file that is not a ledger is an error naming it.
+    /// Reads the experiment's ledger (`None` when there is none); a file that is not a ledger is
+    /// an error naming it.
     pub fn load(x: &Experiment) -> Result<Option<Ledger>, EvalError> {
         let path = Ledger::path(x);
         let text = match std::fs::read_to_string(&path) {
@@ -927,12 +932,18 @@ impl Ledger {
                 });
             }
         };
-        let l: Ledger = serde_json::from_str(&text).map_err(|e| EvalError::Input {
-            path: path.clone(),
-            message: format!("not a ledger of evaluated runs: {e}"),
-        })?;
-        let same = l.episodes == x.episodes && l.seed == x.seed && l.full_budget == x.full_budget;
-        Ok(same.then_some(l))
+        serde_json::from_str(&text)
+            .map(Some)
+            .map_err(|e| EvalError::Input {
+                path,
+                message: format!("not a ledger of evaluated runs: {e}"),
+            })
+    }
+
+    /// Whether the entries were evaluated under the experiment's protocol (episodes, seed,
+    /// budget): those of another protocol cannot go into its tables.
+    pub fn usable(&self, x: &Experiment) -> bool {
+        x.same_protocol(self.episodes, self.seed, self.full_budget)
     }
 
     /// The entry of a planned run: same run directory, observation mode and label.

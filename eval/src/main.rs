@@ -425,7 +425,17 @@ fn experiment(
     let started = std::time::Instant::now();
     // The runs evaluated already (read once): from their run directories, else from the ledger
     // kept beside the tables (a fresh clone holds no run directories).
-    let ledger = exp::Ledger::load(&x)?;
+    let ledger = exp::Ledger::load(&x)?.filter(|l| {
+        let usable = l.usable(&x);
+        if !usable {
+            eprintln!(
+                "{}: evaluated under another protocol (episodes, seed or budget); not used, and \
+                 rewritten with this experiment's runs",
+                exp::Ledger::path(&x).display()
+            );
+        }
+        usable
+    });
     let mut recorded = 0;
     let evaluated: Vec<Option<exp::RunResult>> = plan
         .iter()

@@ -315,9 +315,13 @@ fn experiment_tables_from_the_ledger_alone() {
         text.replace("\"seed\": 1000", "\"seed\": 7"),
     )
     .unwrap();
-    let (code, stdout, _) = eval(&["experiment", f, "--tables-only", "--quiet"]);
+    let (code, stdout, err) = eval(&["experiment", f, "--tables-only", "--quiet"]);
     assert_eq!(code, 0);
     assert!(stdout.contains("- state mode: e_slotssm on t3"), "{stdout}");
+    assert!(
+        err.contains("runs.json: evaluated under another protocol"),
+        "{err}"
+    );
     // Garbage is one error naming the file.
     std::fs::write(out.join("runs.json"), "{\"runs\": 3}").unwrap();
     let (code, _, err) = eval(&["experiment", f, "--tables-only", "--quiet"]);
