@@ -742,11 +742,14 @@ mod shipped {
                 "libero_goal",
                 "libero_mem",
                 "t1",
+                "t10",
                 "t2",
                 "t3",
                 "t4",
                 "t5",
                 "t6",
+                "t7",
+                "t9",
                 "tiny"
             ]
         );
