@@ -43,14 +43,18 @@ fn replay(obs: train::config::ObsMode) {
     let mut cfg = e2e::tiny_config(&data_dir, 1);
     cfg.model.variant = "e_slotssm_oracle".into();
     cfg.model.obs = obs;
+    if obs == train::config::ObsMode::State {
+        // With the squashed relative features, so both sides compute those too.
+        cfg.model.state_relative_cm = vec![2.0, 8.0];
+    }
     cfg.data.augment = false;
     let vocab = train::dataset::RunData::model_vocab(&index).unwrap();
     let mut mcfg = cfg.model_config(vocab).unwrap();
     let opened = data::OpenedDataset::from_index(&data_dir, index).unwrap();
     let spec = (obs == train::config::ObsMode::State)
-        .then(|| train::dataset::state_spec(&opened).unwrap());
+        .then(|| train::dataset::state_spec(&opened, &cfg.model.state_relative_cm).unwrap());
     if let Some(s) = &spec {
-        mcfg = mcfg.with_state(s.tokens(), s.num_categories());
+        mcfg = mcfg.with_state(s.tokens(), s.num_categories(), s.features());
     }
     let run_data = train::dataset::RunData::open(&cfg, &mcfg, spec, &opened).unwrap();
     let device = Device::flex();

@@ -115,7 +115,21 @@ pub enum Observation {
         tokens: usize,
         /// Category ids (padding, unknown and robot included).
         categories: usize,
+        /// Numbers per token F ([`crate::io::state::FEATURES`] unless relative scales add more).
+        #[serde(
+            default = "base_state_features",
+            skip_serializing_if = "is_base_state_features"
+        )]
+        features: usize,
     },
+}
+
+fn base_state_features() -> usize {
+    crate::io::state::FEATURES
+}
+
+fn is_base_state_features(f: &usize) -> bool {
+    *f == crate::io::state::FEATURES
 }
 
 impl Observation {
@@ -477,10 +491,14 @@ impl ModelConfig {
         }
     }
 
-    /// The same model reading the object state: N = `tokens` tokens per frame (K = N slots),
-    /// `categories` category ids, no slot reconstruction (there is no image).
-    pub fn with_state(mut self, tokens: usize, categories: usize) -> Self {
-        self.observation = Observation::State { tokens, categories };
+    /// The same model reading the object state: N = `tokens` tokens per frame (K = N slots) of
+    /// `features` numbers, `categories` category ids, no slot reconstruction (there is no image).
+    pub fn with_state(mut self, tokens: usize, categories: usize, features: usize) -> Self {
+        self.observation = Observation::State {
+            tokens,
+            categories,
+            features,
+        };
         self.slots.num_slots = tokens;
         self.loss.slot_recon = 0.0;
         self
@@ -608,7 +626,18 @@ impl ModelConfig {
         if !(self.loss.tau > 0.0 && self.loss.tau.is_finite()) {
             return err("loss.tau must be a finite number > 0".into());
         }
-        if let Observation::State { tokens, categories } = self.observation {
+        if let Observation::State {
+            tokens,
+            categories,
+            features,
+        } = self.observation
+        {
+            if features < crate::io::state::FEATURES {
+                return err(format!(
+                    "observation: {features} features per state token, at least {} expected",
+                    crate::io::state::FEATURES
+                ));
+            }
             if tokens < 2 || categories < 3 {
                 return err(format!(
                     "observation: {tokens} tokens and {categories} categories; state mode needs \

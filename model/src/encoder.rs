@@ -11,7 +11,6 @@ use burn::tensor::activation::relu;
 use crate::blocks::{Act, Mlp, layer_norm};
 use crate::config::{ModelConfig, Observation};
 use crate::error::{ModelError, Result};
-use crate::io::state::FEATURES;
 
 /// A window of observations, as the model's [`Observer`] reads them.
 // Two tensor handles against one: one value per batch, not worth a Box.
@@ -82,9 +81,14 @@ impl Observer {
     pub fn new(config: &ModelConfig, device: &Device) -> Self {
         match config.observation {
             Observation::Pixels => Observer::Pixels(VisualEncoder::new(config, device)),
-            Observation::State { tokens, categories } => Observer::State(StateEncoder::new(
+            Observation::State {
                 tokens,
                 categories,
+                features,
+            } => Observer::State(StateEncoder::new(
+                tokens,
+                categories,
+                features,
                 config.encoder.feature_dim,
                 device,
             )),
@@ -120,7 +124,7 @@ impl Observer {
     }
 }
 
-/// Object-state encoder: token i → LN(W x_i + E[c_i]) → MLP, x_i the [`FEATURES`] numbers of
+/// Object-state encoder: token i → LN(W x_i + E[c_i]) → MLP, x_i the F numbers of
 /// [`crate::io::state`] and c_i its category.
 #[derive(Module, Debug)]
 pub struct StateEncoder {
@@ -137,11 +141,18 @@ pub struct StateEncoder {
 }
 
 impl StateEncoder {
-    /// An encoder of `tokens` tokens over `categories` categories into width `d_f`.
-    pub fn new(tokens: usize, categories: usize, d_f: usize, device: &Device) -> Self {
+    /// An encoder of `tokens` tokens of `features` numbers over `categories` categories into
+    /// width `d_f`.
+    pub fn new(
+        tokens: usize,
+        categories: usize,
+        features: usize,
+        d_f: usize,
+        device: &Device,
+    ) -> Self {
         StateEncoder {
             category: EmbeddingConfig::new(categories, d_f).init(device),
-            input: LinearConfig::new(FEATURES, d_f).init(device),
+            input: LinearConfig::new(features, d_f).init(device),
             norm: layer_norm(d_f, device),
             mlp: Mlp::new(d_f, d_f, d_f, Act::Relu, device),
             tokens,
@@ -155,16 +166,16 @@ impl StateEncoder {
     /// - output: `[B, T, N, D_f]`
     pub fn forward(&self, features: Tensor<4>, categories: Tensor<3, Int>) -> Result<Tensor<4>> {
         let [b, t, n, f] = features.dims();
-        if n != self.tokens || f != FEATURES || categories.dims() != [b, t, n] {
+        let [nf, d_f] = self.input.weight.dims();
+        if n != self.tokens || f != nf || categories.dims() != [b, t, n] {
             return Err(ModelError::Input(format!(
-                "state features {:?} / categories {:?}, expected [B, T, {}, {FEATURES}] / [B, T, {}]",
+                "state features {:?} / categories {:?}, expected [B, T, {}, {nf}] / [B, T, {}]",
                 features.dims(),
                 categories.dims(),
                 self.tokens,
                 self.tokens
             )));
         }
-        let d_f = self.input.weight.dims()[1];
         let e = self
             .category
             .forward(categories.reshape([b * t, n]))
@@ -314,8 +325,9 @@ mod tests {
 
     #[test]
     fn state_encoder_tells_categories_apart() {
+        use crate::io::state::FEATURES;
         let (_guard, device) = test_device();
-        let enc = StateEncoder::new(3, 6, 16, &device);
+        let enc = StateEncoder::new(3, 6, FEATURES, 16, &device);
         let x = Tensor::<4>::ones([1, 1, 3, FEATURES], &device);
         let c = Tensor::<3, Int>::from_data(TensorData::new(vec![3i64, 4, 3], [1, 1, 3]), &device);
         let y = enc.forward(x, c).unwrap().reshape([3, 16]);

@@ -964,7 +964,7 @@ mod tests {
         let (_guard, device) = test_autodiff_device();
         device.seed(5);
         for variant in ["e_slotssm_oracle", "slotvla_h1"] {
-            let cfg = micro(variant).with_state(4, 6);
+            let cfg = micro(variant).with_state(4, 6, FEATURES);
             let model = PolicyModel::new(&cfg, &device).unwrap();
             let (b, t) = (4, 4);
             let mut x = batch(&cfg, b, t, &device);

@@ -145,6 +145,10 @@ pub struct ModelSection {
     /// object poses and grasps, one token per object; needs episodes with object poses).
     #[serde(default, skip_serializing_if = "ObsMode::is_pixels")]
     pub obs: ObsMode,
+    /// State mode: scales in cm of extra object − gripper features, tanh(Δ / s) per axis and
+    /// scale (none by default; see `model::io::state`).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub state_relative_cm: Vec<f32>,
     /// Size preset.
     #[serde(default = "tiny")]
     pub preset: Preset,
@@ -342,6 +346,17 @@ impl Config {
     /// Value checks that serde cannot express (the message names the key).
     fn check(&self) -> std::result::Result<(), String> {
         Variant::from_name(&self.model.variant).map_err(|e| format!("model.variant: {e}"))?;
+        let rel = &self.model.state_relative_cm;
+        if !rel.is_empty() && self.model.obs != ObsMode::State {
+            return Err(
+                "model.state_relative_cm: only state mode (`obs = \"state\"`) reads it".into(),
+            );
+        }
+        if let Some(s) = rel.iter().find(|s| !(s.is_finite() && **s > 0.0)) {
+            return Err(format!(
+                "model.state_relative_cm: scales are finite numbers of cm > 0 (got {s})"
+            ));
+        }
         let t = &self.train;
         let bad = |k: &str, why: &str| Err(format!("train.{k}: {why}"));
         if t.steps == 0 {
@@ -650,6 +665,24 @@ variant = "e_slotssm"
         assert_eq!(c.train.steps, 7);
         assert_eq!(c.run_name(), "x");
         assert_eq!(c.model.obs, ObsMode::State);
+        let c = Config::load_with(
+            &p,
+            &sets(&["model.obs=state", "model.state_relative_cm=[2, 8.5]"]),
+        )
+        .unwrap();
+        assert_eq!(c.model.state_relative_cm, [2.0, 8.5]);
+        let e = Config::load_with(&p, &sets(&["model.state_relative_cm=[2]"])).unwrap_err();
+        assert!(e.to_string().contains("only state mode"), "{e}");
+        let e = Config::load_with(
+            &p,
+            &sets(&["model.obs=state", "model.state_relative_cm=[0]"]),
+        )
+        .unwrap_err();
+        assert!(
+            e.to_string()
+                .contains("model.state_relative_cm: scales are finite numbers of cm > 0 (got 0)"),
+            "{e}"
+        );
         let e = Config::load_with(&p, &sets(&["train.stepz=7"])).unwrap_err();
         assert!(e.to_string().contains("stepz"), "{e}");
         let e = Config::load_with(&p, &sets(&["train.steps"])).unwrap_err();

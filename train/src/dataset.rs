@@ -378,8 +378,9 @@ impl EpisodeSampler {
 /// The object-state spec of a dataset (state mode): the categories of every object of every
 /// episode, the most objects in one scene, and the standardisation of the token features over
 /// every 4th frame of the training episodes. Every episode must have been recorded with object
-/// poses (episode schema 2); the first that was not is named in the error.
-pub fn state_spec(data: &OpenedDataset) -> Result<StateSpec> {
+/// poses (episode schema 2); the first that was not is named in the error. `relative_cm`: the
+/// scales of the squashed object − gripper features (`[model].state_relative_cm`).
+pub fn state_spec(data: &OpenedDataset, relative_cm: &[f32]) -> Result<StateSpec> {
     use rayon::prelude::*;
     let stats = data
         .episodes()
@@ -393,7 +394,7 @@ pub fn state_spec(data: &OpenedDataset) -> Result<StateSpec> {
                     path.display()
                 ))
             };
-            let mut stats = StateStats::default();
+            let mut stats = StateStats::new(relative_cm);
             for (t, s) in steps.iter().enumerate() {
                 if s.objects.is_empty() || s.objects.iter().any(|o| o.pose.is_none()) {
                     return Err(missing());
@@ -411,7 +412,7 @@ pub fn state_spec(data: &OpenedDataset) -> Result<StateSpec> {
         // In index order, so the error names the first bad episode whatever the threads did.
         .into_iter()
         .collect::<Result<Vec<_>>>()?;
-    let mut all = StateStats::default();
+    let mut all = StateStats::new(relative_cm);
     for s in &stats {
         all.merge(s);
     }

@@ -246,8 +246,8 @@ pub fn train(cfg: &Config, opts: &TrainOptions) -> Result<TrainSummary> {
     let state = match cfg.model.obs {
         ObsMode::Pixels => None,
         ObsMode::State => {
-            let spec = crate::dataset::state_spec(&opened)?;
-            mcfg = mcfg.with_state(spec.tokens(), spec.num_categories());
+            let spec = crate::dataset::state_spec(&opened, &cfg.model.state_relative_cm)?;
+            mcfg = mcfg.with_state(spec.tokens(), spec.num_categories(), spec.features());
             mcfg.validate()
                 .map_err(|e| config_error(&cfg, e.to_string()))?;
             Some(spec)

@@ -19,7 +19,7 @@ use crate::encoder::Frames;
 use crate::error::{ModelError, Result};
 use crate::policy::WindowBatch;
 use crate::variants::Subgoal;
-use state::{FEATURES, StateSpec};
+use state::StateSpec;
 
 /// Format tag of `processor.json`.
 pub const PROCESSOR_FORMAT: &str = "libero-mem-rs/processor/1";
@@ -194,6 +194,9 @@ impl Processor {
                 config.format
             )));
         }
+        if let Some(spec) = &config.state {
+            spec.validate()?;
+        }
         let [h, w] = config.image_size;
         if h == 0 || h != w {
             return Err(ModelError::Config(format!(
@@ -241,21 +244,29 @@ impl Processor {
     /// Whether `model` reads inputs the way this processor prepares them.
     pub fn check_model(&self, model: &ModelConfig) -> Result<()> {
         let c = &self.config;
-        let state = c.state.as_ref().map(|s| (s.tokens(), s.num_categories()));
+        let state = c
+            .state
+            .as_ref()
+            .map(|s| (s.tokens(), s.num_categories(), s.features()));
         let wants = match model.observation {
             Observation::Pixels => None,
-            Observation::State { tokens, categories } => Some((tokens, categories)),
+            Observation::State {
+                tokens,
+                categories,
+                features,
+            } => Some((tokens, categories, features)),
         };
         if state != wants {
+            let say = |x: Option<(usize, usize, usize)>| {
+                x.map_or("pixels".into(), |(n, c, f)| {
+                    format!("{n} state tokens of {f} numbers and {c} categories")
+                })
+            };
             return Err(ModelError::Config(format!(
                 "the processor gives {} but the `{}` model reads {}",
-                state.map_or("pixels".into(), |(n, c)| format!(
-                    "{n} state tokens of {c} categories"
-                )),
+                say(state),
                 model.variant.name(),
-                wants.map_or("pixels".into(), |(n, c)| format!(
-                    "{n} state tokens of {c} categories"
-                )),
+                say(wants),
             )));
         }
         if c.image_size != model.image_size
@@ -336,6 +347,7 @@ impl Processor {
         if self.reads_state() {
             let t = self.state_tokens(obs.objects, &obs.state, obs.goal, obs.seed)?;
             let n = t.categories.len();
+            let nf = t.features.len() / n;
             let subgoal = (self.config.subgoal == SubgoalInput::PerObject).then(|| {
                 let labels: Vec<&str> = t.labels.iter().map(String::as_str).collect();
                 let l = self.config.text.max_len;
@@ -346,7 +358,7 @@ impl Processor {
             });
             return Ok(StepInput {
                 obs: Frames::State(
-                    Tensor::from_data(TensorData::new(t.features, [1, 1, n, FEATURES]), device),
+                    Tensor::from_data(TensorData::new(t.features, [1, 1, n, nf]), device),
                     Tensor::from_data(TensorData::new(t.categories, [1, 1, n]), device),
                 ),
                 instruction,
@@ -447,7 +459,8 @@ impl Processor {
             ),
             Some(spec) => {
                 let n = spec.tokens();
-                let mut features = Vec::with_capacity(b * t * n * FEATURES);
+                let nf = spec.features();
+                let mut features = Vec::with_capacity(b * t * n * nf);
                 let mut categories = Vec::with_capacity(b * t * n);
                 let mut labels = Vec::with_capacity(b * t * n);
                 for s in samples {
@@ -470,7 +483,7 @@ impl Processor {
                 }
                 (
                     Frames::State(
-                        Tensor::from_data(TensorData::new(features, [b, t, n, FEATURES]), device),
+                        Tensor::from_data(TensorData::new(features, [b, t, n, nf]), device),
                         Tensor::from_data(TensorData::new(categories, [b, t, n]), device),
                     ),
                     Some((labels, n)),

@@ -10,7 +10,12 @@
 //!   object's rim or handle lies is linear in them, and not in a quaternion), grasped (0/1), 0, 0;
 //! - robot: gripper position ×10, three zeros, the first two columns of the gripper's rotation
 //!   matrix, 0, then the two finger joint positions ×10;
-//! - padding: zeros.
+//! - padding: zeros;
+//! - then, when the spec asks for relative scales s_1…s_m (cm), 3·m more numbers per token:
+//!   tanh((object position − gripper position) / s_j) per axis for objects, zeros for the robot
+//!   and padding. Linear in centimetres near the gripper and saturating beyond a few s_j, they
+//!   give the last centimetres of a reach the resolution that decimetres standardised over the
+//!   whole table do not (measured on T9, see `configs/state/t9.toml`).
 //!
 //! The numbers are then standardised with the training data's mean and standard deviation per
 //! feature, one set for object tokens and one for the robot token ([`StateStats`]): raw, the
@@ -25,7 +30,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::error::{ModelError, Result};
 
-/// Numbers per token.
+/// Numbers per token without relative scales ([`StateSpec::features`] with them).
 pub const FEATURES: usize = 15;
 /// Category of a padding token.
 pub const PAD: i64 = 0;
@@ -53,10 +58,13 @@ pub struct StateSpec {
     pub categories: Vec<String>,
     /// Object tokens per frame (scenes with fewer objects are padded).
     pub max_objects: usize,
+    /// Scales (cm) of the squashed object − gripper features (none: [`FEATURES`] per token).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub relative_cm: Vec<f32>,
     /// Mean and standard deviation of each feature of object tokens.
-    pub object_norm: [[f32; FEATURES]; 2],
+    pub object_norm: [Vec<f32>; 2],
     /// Mean and standard deviation of each feature of the robot token.
-    pub robot_norm: [[f32; FEATURES]; 2],
+    pub robot_norm: [Vec<f32>; 2],
 }
 
 /// Running sums for the standardisation of [`StateSpec`], over frames of the training data.
@@ -64,14 +72,30 @@ pub struct StateSpec {
 pub struct StateStats {
     names: Vec<String>,
     max_objects: usize,
-    objects: [[f64; FEATURES]; 3],
-    robot: [[f64; FEATURES]; 3],
+    relative_cm: Vec<f32>,
+    /// Count, sum and sum of squares per feature (empty before the first frame).
+    objects: [Vec<f64>; 3],
+    robot: [Vec<f64>; 3],
 }
 
 /// Smallest standard deviation used (features that hardly vary are only centred).
 const MIN_STD: f64 = 0.1;
 
 impl StateStats {
+    /// Statistics of tokens with the squashed relative features at `relative_cm` (none: the
+    /// [`FEATURES`] base numbers only, as [`Default`]).
+    pub fn new(relative_cm: &[f32]) -> Self {
+        StateStats {
+            relative_cm: relative_cm.to_vec(),
+            ..Default::default()
+        }
+    }
+
+    /// Numbers per token.
+    fn features(&self) -> usize {
+        FEATURES + 3 * self.relative_cm.len()
+    }
+
     /// Adds one frame: the objects in scene order (with poses) and the robot's proprio state.
     pub fn add(&mut self, objects: &[ObjectAnnotation], state: &[f32; 8]) -> Result<()> {
         for o in objects {
@@ -81,17 +105,26 @@ impl StateStats {
         }
         self.max_objects = self.max_objects.max(objects.len());
         let order: Vec<usize> = (0..objects.len()).collect();
-        let spec = StateSpec::from_names(objects.iter().map(|o| o.name.as_str()), objects.len());
+        let spec = StateSpec {
+            relative_cm: self.relative_cm.clone(),
+            ..StateSpec::from_names(objects.iter().map(|o| o.name.as_str()), objects.len())
+        };
         let t = raw_tokens(&spec, objects, state, "0", &order)?;
         let n = objects.len() + 1;
+        let nf = self.features();
+        for acc in [&mut self.objects, &mut self.robot] {
+            for v in acc.iter_mut() {
+                v.resize(nf, 0.0);
+            }
+        }
         for k in 0..n {
             let acc = if k + 1 == n {
                 &mut self.robot
             } else {
                 &mut self.objects
             };
-            let f = &t.features[k * FEATURES..(k + 1) * FEATURES];
-            for d in 0..FEATURES {
+            let f = &t.features[k * nf..(k + 1) * nf];
+            for d in 0..nf {
                 let x = f64::from(f[d]);
                 acc[0][d] += 1.0;
                 acc[1][d] += x;
@@ -102,20 +135,27 @@ impl StateStats {
     }
 
     /// Adds the sums of `other` (in a fixed order, so the result does not depend on threads).
+    /// Both must have been made with the same relative scales.
     pub fn merge(&mut self, other: &StateStats) {
+        assert_eq!(
+            self.relative_cm, other.relative_cm,
+            "statistics of tokens with different relative scales"
+        );
         for n in &other.names {
             if !self.names.contains(n) {
                 self.names.push(n.clone());
             }
         }
         self.max_objects = self.max_objects.max(other.max_objects);
+        let nf = self.features();
         for (a, b) in [
             (&mut self.objects, &other.objects),
             (&mut self.robot, &other.robot),
         ] {
             for i in 0..3 {
-                for d in 0..FEATURES {
-                    a[i][d] += b[i][d];
+                a[i].resize(nf, 0.0);
+                for (x, y) in a[i].iter_mut().zip(&b[i]) {
+                    *x += y;
                 }
             }
         }
@@ -123,18 +163,21 @@ impl StateStats {
 
     /// The spec of everything added.
     pub fn finish(&self) -> StateSpec {
-        let norm = |acc: &[[f64; FEATURES]; 3]| {
-            let mut out = [[0.0f32; FEATURES], [1.0f32; FEATURES]];
-            for d in 0..FEATURES {
-                let n = acc[0][d].max(1.0);
-                let mean = acc[1][d] / n;
-                let var = (acc[2][d] / n - mean * mean).max(0.0);
-                out[0][d] = mean as f32;
-                out[1][d] = var.sqrt().max(MIN_STD) as f32;
-            }
-            out
+        let nf = self.features();
+        let norm = |acc: &[Vec<f64>; 3]| {
+            let (means, stds) = (0..nf)
+                .map(|d| {
+                    let sum = |i: usize| acc[i].get(d).copied().unwrap_or(0.0);
+                    let n = sum(0).max(1.0);
+                    let mean = sum(1) / n;
+                    let var = (sum(2) / n - mean * mean).max(0.0);
+                    (mean as f32, var.sqrt().max(MIN_STD) as f32)
+                })
+                .unzip();
+            [means, stds]
         };
         StateSpec {
+            relative_cm: self.relative_cm.clone(),
             object_norm: norm(&self.objects),
             robot_norm: norm(&self.robot),
             ..StateSpec::from_names(self.names.iter().map(String::as_str), self.max_objects)
@@ -152,9 +195,45 @@ impl StateSpec {
         StateSpec {
             categories,
             max_objects,
-            object_norm: [[0.0; FEATURES], [1.0; FEATURES]],
-            robot_norm: [[0.0; FEATURES], [1.0; FEATURES]],
+            relative_cm: Vec::new(),
+            object_norm: [vec![0.0; FEATURES], vec![1.0; FEATURES]],
+            robot_norm: [vec![0.0; FEATURES], vec![1.0; FEATURES]],
         }
+    }
+
+    /// Numbers per token F: [`FEATURES`], then 3 per relative scale.
+    pub fn features(&self) -> usize {
+        FEATURES + 3 * self.relative_cm.len()
+    }
+
+    /// Checks that the standardisation has one mean and deviation per feature and that the
+    /// relative scales are positive (a hand-edited or corrupt `processor.json`).
+    pub fn validate(&self) -> Result<()> {
+        let nf = self.features();
+        if let Some(s) = self
+            .relative_cm
+            .iter()
+            .find(|s| !(s.is_finite() && **s > 0.0))
+        {
+            return Err(ModelError::Config(format!(
+                "state relative scale {s} cm: scales are finite and > 0"
+            )));
+        }
+        for (what, norm) in [
+            ("object_norm", &self.object_norm),
+            ("robot_norm", &self.robot_norm),
+        ] {
+            if norm.iter().any(|v| v.len() != nf)
+                || norm[1]
+                    .iter()
+                    .any(|s| s.partial_cmp(&0.0) != Some(std::cmp::Ordering::Greater))
+            {
+                return Err(ModelError::Config(format!(
+                    "state {what}: expected {nf} means and {nf} deviations > 0, one per feature"
+                )));
+            }
+        }
+        Ok(())
     }
 
     /// Tokens per frame N (objects and the robot).
@@ -237,7 +316,7 @@ fn rotation_columns(m: [[f32; 3]; 3]) -> [f32; 6] {
 /// The tokens of one frame.
 #[derive(Clone, Debug, PartialEq)]
 pub struct StateTokens {
-    /// Features `[N, FEATURES]`.
+    /// Features `[N, F]` (F = [`StateSpec::features`]).
     pub features: Vec<f32>,
     /// Category ids `[N]`.
     pub categories: Vec<i64>,
@@ -258,6 +337,7 @@ pub fn tokens(
 ) -> Result<StateTokens> {
     let mut t = raw_tokens(spec, objects, state, robot_label, order)?;
     let n = spec.tokens();
+    let nf = spec.features();
     for k in 0..n {
         let [mean, std] = if k + 1 == n {
             &spec.robot_norm
@@ -266,10 +346,7 @@ pub fn tokens(
         } else {
             &spec.object_norm
         };
-        for (d, x) in t.features[k * FEATURES..(k + 1) * FEATURES]
-            .iter_mut()
-            .enumerate()
-        {
+        for (d, x) in t.features[k * nf..(k + 1) * nf].iter_mut().enumerate() {
             *x = (*x - mean[d]) / std[d];
         }
     }
@@ -299,7 +376,8 @@ fn raw_tokens(
         )));
     }
     let n = spec.tokens();
-    let mut features = vec![0.0f32; n * FEATURES];
+    let nf = spec.features();
+    let mut features = vec![0.0f32; n * nf];
     let mut categories = vec![PAD; n];
     let mut labels = vec!["0".to_string(); n];
     let eef = [state[0], state[1], state[2]];
@@ -311,10 +389,13 @@ fn raw_tokens(
                 o.name
             ))
         })?;
-        let f = &mut features[k * FEATURES..(k + 1) * FEATURES];
+        let f = &mut features[k * nf..(k + 1) * nf];
         for d in 0..3 {
             f[d] = pose[d] * SCALE;
             f[3 + d] = (pose[d] - eef[d]) * SCALE;
+            for (j, s) in spec.relative_cm.iter().enumerate() {
+                f[FEATURES + 3 * j + d] = ((pose[d] - eef[d]) * 100.0 / s).tanh();
+            }
         }
         f[6..12].copy_from_slice(&rotation_columns(quat_matrix([
             pose[3], pose[4], pose[5], pose[6],
@@ -323,7 +404,7 @@ fn raw_tokens(
         categories[k] = spec.category_id(&o.name);
         labels[k] = o.subgoal_label.clone();
     }
-    let r = &mut features[(n - 1) * FEATURES..];
+    let r = &mut features[(n - 1) * nf..];
     for d in 0..3 {
         r[d] = eef[d] * SCALE;
     }
@@ -445,7 +526,7 @@ mod tests {
         assert_eq!(spec.categories, ["bowl", "plate"]);
         assert_eq!(spec.max_objects, 2);
         // Object x in dm: 1, 3, 3 → mean 7/3; the robot x: 0, 2 → mean 1, std 1.
-        let [mean, std] = spec.object_norm;
+        let [mean, std] = spec.object_norm.clone();
         assert!((mean[0] - 7.0 / 3.0).abs() < 1e-5, "{mean:?}");
         assert!((std[0] - (8.0f32 / 9.0).sqrt()).abs() < 1e-5, "{std:?}");
         assert_eq!(std[7], MIN_STD as f32, "a constant is only centred");
@@ -458,6 +539,55 @@ mod tests {
             (t.features[2 * FEATURES] - 1.0).abs() < 1e-5,
             "robot x (2 − 1) / 1"
         );
+    }
+
+    #[test]
+    fn relative_scales_add_squashed_offsets_and_old_specs_still_load() {
+        let mut stats = StateStats::new(&[1.0, 10.0]);
+        let state = [0.1, 0.1, 1.0, 0.0, 0.0, 0.0, 0.02, -0.02];
+        stats
+            .add(
+                &[obj("bowl_1", 0.12, "0"), obj("plate_1", -0.1, "0")],
+                &state,
+            )
+            .unwrap();
+        let spec = stats.finish();
+        assert_eq!(spec.features(), FEATURES + 6);
+        assert_eq!(spec.object_norm[0].len(), FEATURES + 6);
+        spec.validate().unwrap();
+        let raw = StateSpec {
+            object_norm: [vec![0.0; FEATURES + 6], vec![1.0; FEATURES + 6]],
+            robot_norm: [vec![0.0; FEATURES + 6], vec![1.0; FEATURES + 6]],
+            ..spec.clone()
+        };
+        let t = tokens(&raw, &[obj("bowl_1", 0.12, "0")], &state, "0", &[0]).unwrap();
+        let nf = FEATURES + 6;
+        let f = &t.features[..nf];
+        // Δx = 2 cm: tanh(2 / 1) at 1 cm and tanh(2 / 10) at 10 cm; Δy = 0; Δz = −10 cm.
+        assert!((f[FEATURES] - 2.0f32.tanh()).abs() < 1e-5, "{f:?}");
+        assert!((f[FEATURES + 3] - 0.2f32.tanh()).abs() < 1e-5, "{f:?}");
+        assert!(f[FEATURES + 1].abs() < 1e-5 && f[FEATURES + 4].abs() < 1e-5);
+        assert!((f[FEATURES + 5] - (-1.0f32).tanh()).abs() < 1e-4, "{f:?}");
+        // Padding (token 1) and the robot (token 2) carry zeros there.
+        assert!(t.features[2 * nf - 6..2 * nf].iter().all(|&v| v == 0.0));
+        assert!(t.features[3 * nf - 6..3 * nf].iter().all(|&v| v == 0.0));
+        assert_eq!(t.features.len(), 3 * nf);
+        // A spec saved before relative scales existed reads as none.
+        let mut json: serde_json::Value =
+            serde_json::to_value(StateSpec::from_names(["bowl_1"], 1)).unwrap();
+        assert!(json.get("relative_cm").is_none(), "not written when empty");
+        json["object_norm"] =
+            serde_json::to_value([[0.0f32; FEATURES], [1.0f32; FEATURES]]).unwrap();
+        let old: StateSpec = serde_json::from_value(json).unwrap();
+        assert_eq!(old.features(), FEATURES);
+        old.validate().unwrap();
+        // A spec whose standardisation does not match its features is refused.
+        let bad = StateSpec {
+            relative_cm: vec![2.0],
+            ..old
+        };
+        let e = bad.validate().unwrap_err().to_string();
+        assert!(e.contains("expected 18 means"), "{e}");
     }
 
     #[test]
