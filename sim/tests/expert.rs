@@ -143,3 +143,33 @@ fn or_goals_expose_their_branches() {
     let b = subgoal_branches(&t3.problem.goal);
     assert_eq!((b.len(), b[0].len()), (1, 4));
 }
+
+#[test]
+fn t7_moves_first_the_bowl_nearer_the_empty_plate() {
+    // The branch must be one a policy can tell from the scene (the two bowls look alike): the
+    // bowl nearer (in the table plane) to the empty plate goes first, whatever the seed.
+    let t7 = registry::resolve("t7").unwrap();
+    let branches = subgoal_branches(&t7.problem.goal);
+    let mut env = Env::from_task(&t7, state_only()).unwrap();
+    let mut chosen = [0usize; 2];
+    for seed in 0..8 {
+        let obs = env.reset(seed).unwrap();
+        let scene = env.scene().unwrap();
+        let planar = |b: &Vec<Vec<sim::task::Atom>>| {
+            let a = &b[0][0];
+            let p = obs.objects[scene.instance(&a.args[0]).unwrap()].pos;
+            let q = obs.objects[scene.instance(&a.args[1]).unwrap()].pos;
+            (p[0] - q[0]).hypot(p[1] - q[1])
+        };
+        let d: Vec<f64> = branches.iter().map(planar).collect();
+        let nearer = usize::from(d[1] < d[0]);
+        let mut ex = Expert::new(&t7, seed);
+        ex.act(&env, &obs).unwrap();
+        assert_eq!(ex.branch, nearer, "seed {seed}: distances {d:?}");
+        chosen[ex.branch] += 1;
+    }
+    assert!(
+        chosen[0] > 0 && chosen[1] > 0,
+        "both orders occur: {chosen:?}"
+    );
+}

@@ -526,8 +526,9 @@ while let Some(action) = expert.act(&env, &obs) {             // None: demonstra
 ```
 
 * **Plan.** On the first `act` the goal is split into subgoals (`subgoal_branches`; an `Or` branch is
-  drawn from the seed — T7 — or, for T9/T10, the branch whose first subgoal puts the cheese into the
-  basket nearest to it) and turned into a queue of ops: move (proportional, gain ≈ 12 action units per
+  chosen by where things are: the branch whose first object is nearest to where it goes — T7: the bowl
+  nearer the empty plate moves first; T9/T10: the cheese goes into the basket nearest to it; a rule a
+  policy can see, unlike a draw from the seed) and turned into a queue of ops: move (proportional, gain ≈ 12 action units per
   metre, to a live target: a point on an object, or *carry* — the held object's origin to a destination),
   yaw, gripper open/close (10–12 steps, fully closed before lifting), hold, wait for the tracker.
 * **Grasps.** Bowl: pinch the rim wall on the ±y side whose neighbourhood is freer (the 20 cm hand box is
@@ -566,7 +567,7 @@ while let Some(action) = expert.act(&env, &obs) {             // None: demonstra
   retreats 6 cm and holds 5 steps; nothing is disturbed after completion.
 * **Variation** (ChaCha8 from the episode seed): approach/placement offsets (±2–6 mm), grasp height, a
   per-episode speed factor (0.85–1.15), 0–3-step pauses, Gaussian noise σ = 0.03 on translation actions
-  while moving, rim side on ties, branch choice (T7), drawer tilt (±0.05 rad), knob twist (±0.05 rad).
+  while moving, rim side on ties, drawer tilt (±0.05 rad), knob twist (±0.05 rad).
 
 ## Asset changes made for the expert
 
