@@ -68,14 +68,25 @@ pub struct StateSpec {
 }
 
 /// Running sums for the standardisation of [`StateSpec`], over frames of the training data.
-#[derive(Clone, Debug, Default)]
+#[derive(Clone, Debug)]
 pub struct StateStats {
     names: Vec<String>,
     max_objects: usize,
     relative_cm: Vec<f32>,
-    /// Count, sum and sum of squares per feature (empty before the first frame).
+    /// Count, sum and sum of squares per feature.
     objects: [Vec<f64>; 3],
     robot: [Vec<f64>; 3],
+}
+
+impl Default for StateStats {
+    fn default() -> Self {
+        StateStats::new(&[])
+    }
+}
+
+/// Numbers per token with the squashed relative features at `relative_cm`.
+fn features_with(relative_cm: &[f32]) -> usize {
+    FEATURES + 3 * relative_cm.len()
 }
 
 /// Smallest standard deviation used (features that hardly vary are only centred).
@@ -85,15 +96,14 @@ impl StateStats {
     /// Statistics of tokens with the squashed relative features at `relative_cm` (none: the
     /// [`FEATURES`] base numbers only, as [`Default`]).
     pub fn new(relative_cm: &[f32]) -> Self {
+        let zeros = || std::array::from_fn(|_| vec![0.0; features_with(relative_cm)]);
         StateStats {
+            names: Vec::new(),
+            max_objects: 0,
             relative_cm: relative_cm.to_vec(),
-            ..Default::default()
+            objects: zeros(),
+            robot: zeros(),
         }
-    }
-
-    /// Numbers per token.
-    fn features(&self) -> usize {
-        FEATURES + 3 * self.relative_cm.len()
     }
 
     /// Adds one frame: the objects in scene order (with poses) and the robot's proprio state.
@@ -111,12 +121,7 @@ impl StateStats {
         };
         let t = raw_tokens(&spec, objects, state, "0", &order)?;
         let n = objects.len() + 1;
-        let nf = self.features();
-        for acc in [&mut self.objects, &mut self.robot] {
-            for v in acc.iter_mut() {
-                v.resize(nf, 0.0);
-            }
-        }
+        let nf = spec.features();
         for k in 0..n {
             let acc = if k + 1 == n {
                 &mut self.robot
@@ -147,13 +152,11 @@ impl StateStats {
             }
         }
         self.max_objects = self.max_objects.max(other.max_objects);
-        let nf = self.features();
         for (a, b) in [
             (&mut self.objects, &other.objects),
             (&mut self.robot, &other.robot),
         ] {
             for i in 0..3 {
-                a[i].resize(nf, 0.0);
                 for (x, y) in a[i].iter_mut().zip(&b[i]) {
                     *x += y;
                 }
@@ -163,14 +166,12 @@ impl StateStats {
 
     /// The spec of everything added.
     pub fn finish(&self) -> StateSpec {
-        let nf = self.features();
         let norm = |acc: &[Vec<f64>; 3]| {
-            let (means, stds) = (0..nf)
+            let (means, stds) = (0..acc[0].len())
                 .map(|d| {
-                    let sum = |i: usize| acc[i].get(d).copied().unwrap_or(0.0);
-                    let n = sum(0).max(1.0);
-                    let mean = sum(1) / n;
-                    let var = (sum(2) / n - mean * mean).max(0.0);
+                    let n = acc[0][d].max(1.0);
+                    let mean = acc[1][d] / n;
+                    let var = (acc[2][d] / n - mean * mean).max(0.0);
                     (mean as f32, var.sqrt().max(MIN_STD) as f32)
                 })
                 .unzip();
@@ -203,7 +204,7 @@ impl StateSpec {
 
     /// Numbers per token F: [`FEATURES`], then 3 per relative scale.
     pub fn features(&self) -> usize {
-        FEATURES + 3 * self.relative_cm.len()
+        features_with(&self.relative_cm)
     }
 
     /// Checks that the standardisation has one mean and deviation per feature and that the
