@@ -33,10 +33,10 @@ fn check_tasks(path: &Path, cfg: &train::Config) {
             panic!("{}: [eval].tasks `{t}`: {e}", path.display());
         }
     }
-    if let Some(g) = &cfg.data.generate {
-        if let Err(e) = eval::resolve_tasks(&g.task, None) {
-            panic!("{}: data.generate.task `{}`: {e}", path.display(), g.task);
-        }
+    if let Some(g) = &cfg.data.generate
+        && let Err(e) = eval::resolve_tasks(&g.task, None)
+    {
+        panic!("{}: data.generate.task `{}`: {e}", path.display(), g.task);
     }
 }
 
