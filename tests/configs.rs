@@ -1,5 +1,5 @@
-//! Every config the repository ships loads: the training configs under `configs/` and
-//! `configs/state/` pass `train`'s checks and name tasks the simulator knows, and every run an
+//! Every config the repository ships fits the rest of the workspace: the training configs under
+//! `configs/` and `configs/state/` name tasks the simulator knows, and every run an
 //! experiment file under `configs/experiments/` plans (its config, its `set` overrides and each
 //! variant) loads as `eval experiment` will hand it to `train`, in the observation mode the
 //! experiment files it under.
@@ -40,26 +40,19 @@ fn check_tasks(path: &Path, cfg: &train::Config) {
     }
 }
 
+/// The training configs' tasks are the simulator's (`train`'s own test checks that they load and
+/// are named as their files; it cannot ask the simulator).
 #[test]
-fn every_training_config_loads() {
+fn every_training_config_names_known_tasks() {
     let mut n = 0;
     for dir in ["configs", "configs/state"] {
         for path in tomls(&root().join(dir)) {
             let cfg = train::Config::load(&path)
                 .unwrap_or_else(|e| panic!("{} does not load: {e}", path.display()));
             check_tasks(&path, &cfg);
-            // The state configs are state mode, the others pixels.
-            assert_eq!(
-                cfg.model.obs.is_pixels(),
-                dir == "configs",
-                "{}: [model].obs",
-                path.display()
-            );
             n += 1;
         }
     }
-    // 15 in configs/ (T1–T10, LIBERO-Goal, three baselines, the CI config) and 13 in configs/state/
-    // when this was written: a count that falls means a config went missing.
     assert!(n >= 28, "only {n} training configs found");
 }
 

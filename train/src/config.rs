@@ -782,6 +782,7 @@ mod shipped {
                 "t5",
                 "t6",
                 "t7",
+                "t8",
                 "t9",
                 "tiny"
             ]
