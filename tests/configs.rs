@@ -6,14 +6,6 @@
 
 use std::path::{Path, PathBuf};
 
-/// The repository root.
-fn root() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR"))
-        .parent()
-        .expect("tests/ has a parent")
-        .to_path_buf()
-}
-
 /// The `*.toml` files directly in `dir`, sorted.
 fn tomls(dir: &Path) -> Vec<PathBuf> {
     let mut out: Vec<PathBuf> = std::fs::read_dir(dir)
@@ -46,7 +38,7 @@ fn check_tasks(path: &Path, cfg: &train::Config) {
 fn every_training_config_names_known_tasks() {
     let mut n = 0;
     for dir in ["configs", "configs/state"] {
-        for path in tomls(&root().join(dir)) {
+        for path in tomls(&e2e::repo_root().join(dir)) {
             let cfg = train::Config::load(&path)
                 .unwrap_or_else(|e| panic!("{} does not load: {e}", path.display()));
             check_tasks(&path, &cfg);
@@ -58,7 +50,7 @@ fn every_training_config_names_known_tasks() {
 
 #[test]
 fn every_experiment_run_loads_as_train_will_see_it() {
-    let files = tomls(&root().join("configs/experiments"));
+    let files = tomls(&e2e::repo_root().join("configs/experiments"));
     assert!(files.len() >= 2, "experiment files: {files:?}");
     let mut planned = 0;
     for file in files {
@@ -66,9 +58,8 @@ fn every_experiment_run_loads_as_train_will_see_it() {
             .unwrap_or_else(|e| panic!("{} does not load: {e}", file.display()));
         for p in x.plan() {
             let spec = p.spec;
-            let config = root().join(&spec.config);
-            let mut sets = spec.set.clone();
-            sets.push(format!("model.variant=\"{}\"", p.variant));
+            let config = e2e::repo_root().join(&spec.config);
+            let sets = eval::experiment::train_overrides(spec, &p.name, &p.variant);
             let cfg = train::Config::load_with(&config, &sets).unwrap_or_else(|e| {
                 panic!(
                     "{}: run `{}` ({} with {:?}) does not load: {e}",

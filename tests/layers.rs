@@ -34,10 +34,7 @@ struct File {
 const CRATES: [&str; 5] = ["data", "model", "train", "eval", "sim"];
 
 fn src_dir(krate: &str) -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("..")
-        .join(krate)
-        .join("src")
+    e2e::repo_root().join(krate).join("src")
 }
 
 fn rs_files(dir: &Path, out: &mut Vec<PathBuf>) {

@@ -209,6 +209,17 @@ fn slug(s: &str) -> String {
         .collect()
 }
 
+/// The `train --set` overrides of one run, in the order [`train`] gives them (later ones win):
+/// its name, its variant, then the group's `set`.
+pub fn train_overrides(spec: &RunSpec, name: &str, variant: &str) -> Vec<String> {
+    let mut out = vec![
+        format!("name=\"{name}\""),
+        format!("model.variant=\"{variant}\""),
+    ];
+    out.extend(spec.set.iter().cloned());
+    out
+}
+
 /// Trains a run with the `train` binary found next to this executable (resuming on its own);
 /// its output goes to `RUN/train.log`.
 pub fn train(spec: &RunSpec, name: &str, variant: &str, runs_dir: &Path) -> Result<(), EvalError> {
@@ -242,12 +253,8 @@ pub fn train(spec: &RunSpec, name: &str, variant: &str, runs_dir: &Path) -> Resu
     cmd.arg(&spec.config)
         .arg("--quiet")
         .arg("--run-dir")
-        .arg(&run)
-        .arg("--set")
-        .arg(format!("name=\"{name}\""))
-        .arg("--set")
-        .arg(format!("model.variant=\"{variant}\""));
-    for s in &spec.set {
+        .arg(&run);
+    for s in train_overrides(spec, name, variant) {
         cmd.arg("--set").arg(s);
     }
     let status = cmd

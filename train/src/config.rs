@@ -352,7 +352,7 @@ impl Config {
                 "model.state_relative_cm: only state mode (`obs = \"state\"`) reads it".into(),
             );
         }
-        if let Some(s) = rel.iter().find(|s| !(s.is_finite() && **s > 0.0)) {
+        if let Some(s) = model::io::state::bad_relative_scale(rel) {
             return Err(format!(
                 "model.state_relative_cm: scales are finite numbers of cm > 0 (got {s})"
             ));

@@ -89,6 +89,14 @@ fn features_with(relative_cm: &[f32]) -> usize {
     FEATURES + 3 * relative_cm.len()
 }
 
+/// The first of `relative_cm` that is not a usable scale (finite and > 0 cm), if any.
+pub fn bad_relative_scale(relative_cm: &[f32]) -> Option<f32> {
+    relative_cm
+        .iter()
+        .copied()
+        .find(|s| !(s.is_finite() && *s > 0.0))
+}
+
 /// Smallest standard deviation used (features that hardly vary are only centred).
 const MIN_STD: f64 = 0.1;
 
@@ -211,11 +219,7 @@ impl StateSpec {
     /// relative scales are positive (a hand-edited or corrupt `processor.json`).
     pub fn validate(&self) -> Result<()> {
         let nf = self.features();
-        if let Some(s) = self
-            .relative_cm
-            .iter()
-            .find(|s| !(s.is_finite() && **s > 0.0))
-        {
+        if let Some(s) = bad_relative_scale(&self.relative_cm) {
             return Err(ModelError::Config(format!(
                 "state relative scale {s} cm: scales are finite and > 0"
             )));
