@@ -46,6 +46,7 @@ pub mod index;
 pub mod pool;
 pub mod rlds;
 pub mod schema;
+pub mod shard;
 pub mod synth;
 pub mod text;
 pub mod tfrecord;

@@ -67,6 +67,9 @@ pub struct EvalConfig {
     pub libero_init: bool,
     /// Asset pack the scenes are built from (builtin primitives or LIBERO's meshes).
     pub assets: sim::pack::AssetPack,
+    /// Run only this shard's episodes of every task (k mod N = I); [`report::merge`] joins the
+    /// shards' results into the unsharded run's.
+    pub shard: data::shard::Shard,
 }
 
 /// Whether episodes of `task` follow LIBERO's protocol (init state k, idle steps): asked for with
@@ -95,6 +98,7 @@ impl Default for EvalConfig {
             viz_every: 4,
             libero_init: false,
             assets: sim::pack::AssetPack::Builtin,
+            shard: data::shard::Shard::WHOLE,
         }
     }
 }
@@ -262,9 +266,9 @@ pub struct Progress {
 /// Makes one policy per worker.
 pub type PolicyFactory<'a> = dyn Fn() -> Result<Box<dyn Policy>, EvalError> + Sync + 'a;
 
-/// Runs `cfg.episodes` episodes of every task on `cfg.workers` threads (one simulator and one policy
-/// each, made by `make`), and summarises them. Episode k of a task always uses the same seed, so the
-/// results do not depend on the number of workers.
+/// Runs `cfg.episodes` episodes of every task (those of `cfg.shard`) on `cfg.workers` threads (one
+/// simulator and one policy each, made by `make`), and summarises them. Episode k of a task always
+/// uses the same seed, so the results depend neither on the number of workers nor on sharding.
 pub fn evaluate(
     tasks: &[TaskSpec],
     make: &PolicyFactory,
@@ -285,7 +289,14 @@ pub fn evaluate(
             })?;
         }
     }
-    let total = tasks.len() * cfg.episodes;
+    let items = cfg.shard.items(cfg.episodes);
+    if items.is_empty() {
+        return Err(EvalError::Argument(format!(
+            "shard {} of {} episodes per task holds no episode",
+            cfg.shard, cfg.episodes
+        )));
+    }
+    let total = tasks.len() * items.len();
     let done = AtomicUsize::new(0);
     let mut rows = Vec::new();
     let mut all = Vec::new();
@@ -306,7 +317,8 @@ pub fn evaluate(
             let env = env_for(task, policy.as_ref(), cfg)?;
             Ok((policy, env))
         };
-        let work = |(policy, env): &mut (Box<dyn Policy>, Env), k: usize| {
+        let work = |(policy, env): &mut (Box<dyn Policy>, Env), i: usize| {
+            let k = items[i];
             let outputs = RolloutOutputs {
                 record: cfg.record.as_ref().map(|d| {
                     d.join(task_slug(&task.id))
@@ -336,7 +348,7 @@ pub fn evaluate(
             });
             Ok(())
         };
-        data::pool::for_each(cfg.episodes, cfg.workers, init, work, || {
+        data::pool::for_each(items.len(), cfg.workers, init, work, || {
             EvalError::Argument("an evaluation worker panicked".into())
         })?;
         let mut eps = results.into_inner().unwrap_or_else(|p| p.into_inner());
@@ -351,6 +363,7 @@ pub fn evaluate(
         seed: cfg.seed,
         episodes_per_task: cfg.episodes,
         full_budget: cfg.full_budget,
+        shard: cfg.shard,
         tasks: rows,
         episodes: all,
     })
@@ -423,5 +436,83 @@ mod tests {
         assert_eq!(a.episodes.len(), 3);
         assert!(a.episodes.iter().all(|e| e.steps == tasks[0].max_steps));
         assert_eq!(a.tasks[0].success, 0.0);
+    }
+
+    #[test]
+    fn shards_merge_into_the_unsharded_results() {
+        use data::shard::Shard;
+        let tasks = resolve_tasks("t1,t2", None).unwrap();
+        let run = |shard| {
+            let cfg = EvalConfig {
+                episodes: 3,
+                seed: 9,
+                shard,
+                ..EvalConfig::default()
+            };
+            let make =
+                || -> Result<Box<dyn Policy>, EvalError> { Ok(Box::new(RandomPolicy::default())) };
+            let mut r = evaluate(&tasks, &make, &cfg, &|_| {}).unwrap();
+            r.policy = "random".into();
+            r
+        };
+        let whole = run(Shard::WHOLE);
+        let parts: Vec<(PathBuf, Results)> = [1, 0]
+            .into_iter()
+            .map(|i| {
+                let shard = Shard::new(i, 2).unwrap();
+                (PathBuf::from(format!("s{i}")), run(shard))
+            })
+            .collect();
+        assert_eq!(
+            parts[0].1.episodes.len(),
+            2,
+            "shard 1/2 runs episode 1 of each task"
+        );
+        assert!(parts[1].1.markdown().contains("shard 0/2"));
+        let merged = report::merge(&parts).unwrap();
+        assert_eq!(merged, whole);
+        assert_eq!(merged.markdown(), whole.markdown());
+        assert_eq!(
+            serde_json::to_string(&merged).unwrap(),
+            serde_json::to_string(&whole).unwrap(),
+            "no shard field in the merged file"
+        );
+        // A shard missing, given twice, or of another evaluation is refused.
+        let e = report::merge(&parts[..1]).unwrap_err();
+        assert!(e.to_string().contains("shard 0/2 is missing"), "{e}");
+        let twice = vec![parts[0].clone(), parts[0].clone()];
+        let e = report::merge(&twice).unwrap_err();
+        assert!(
+            e.to_string().contains("s1: shard 1/2 is given twice"),
+            "{e}"
+        );
+        let mut other = parts.clone();
+        other[1].1.seed = 10;
+        let e = report::merge(&other).unwrap_err();
+        assert!(
+            e.to_string()
+                .contains("s0: not a shard of the same evaluation as s1: its seed differs"),
+            "{e}"
+        );
+        let mut lost = parts.clone();
+        lost[1].1.episodes.retain(|e| e.task.ends_with("t1"));
+        let e = report::merge(&lost).unwrap_err();
+        assert!(
+            e.to_string().contains("libero_mem/t2 episode 0 is in none"),
+            "{e}"
+        );
+        assert_eq!(e.exit_code(), 2);
+        let e = evaluate(
+            &tasks,
+            &|| -> Result<Box<dyn Policy>, EvalError> { Ok(Box::new(ZeroPolicy)) },
+            &EvalConfig {
+                episodes: 2,
+                shard: Shard::new(2, 3).unwrap(),
+                ..EvalConfig::default()
+            },
+            &|_| {},
+        )
+        .unwrap_err();
+        assert!(e.to_string().contains("holds no episode"), "{e}");
     }
 }

@@ -73,13 +73,23 @@ enum Command {
         #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u64).range(1..))]
         jobs: u64,
     },
+    /// Join the results of the shards of one evaluation (`eval --shard I/N`, e.g. a Slurm array
+    /// job's tasks) into the unsharded run's results.{md,json,csv}.
+    Merge {
+        /// Every shard's output folder (or results.json), in any order.
+        #[arg(required = true)]
+        parts: Vec<PathBuf>,
+        /// Folder for the merged results.md, results.json and results.csv.
+        #[arg(long)]
+        out: PathBuf,
+    },
     /// Temporal scaling: evaluate the repetition family at several repetition counts N.
     Scaling {
         /// Repetition counts (N unseen in training allowed), e.g. `3,5,7,9,12`.
         #[arg(long, value_delimiter = ',', required = true)]
         repeats: Vec<usize>,
         #[command(flatten)]
-        eval: EvalArgs,
+        eval: Box<EvalArgs>,
     },
 }
 
@@ -140,6 +150,10 @@ struct EvalArgs {
     /// robot look; needs `sim assets install libero`). The pack-only suites always use libero.
     #[arg(long, default_value = "builtin")]
     assets: String,
+    /// Run only shard I of N of every task's episodes (k mod N = I; 0 ≤ I < N), e.g. one task of
+    /// a Slurm array job; `eval merge` joins the shards' output folders.
+    #[arg(long)]
+    shard: Option<data::shard::Shard>,
     /// No progress bar.
     #[arg(long)]
     quiet: bool,
@@ -149,6 +163,7 @@ fn main() -> ExitCode {
     let cli = Cli::parse();
     let result = match cli.command {
         Some(Command::Compare { runs, out }) => compare(&runs, out),
+        Some(Command::Merge { parts, out }) => merge(&parts, &out),
         Some(Command::Scaling { repeats, eval }) => scaling(&eval, &repeats),
         Some(Command::Experiment {
             file,
@@ -256,8 +271,9 @@ fn run_tasks(
         viz_every: args.viz_every,
         libero_init: args.libero_init,
         assets: args.assets.parse().map_err(EvalError::Argument)?,
+        shard: args.shard.unwrap_or_default(),
     };
-    let total = (tasks.len() * cfg.episodes) as u64;
+    let total = (tasks.len() * cfg.shard.items(cfg.episodes).len()) as u64;
     let bar = if args.quiet {
         indicatif::ProgressBar::hidden()
     } else {
@@ -288,20 +304,33 @@ fn run_tasks(
 }
 
 fn header(s: &Setup, args: &EvalArgs) -> String {
-    let who = match &s.run {
-        Some(r) => format!("model {} (step {})", r.dir.display(), r.step),
-        None => format!("{} policy", s.kind.name()),
-    };
-    format!(
-        "{who}, seed {}, {} episodes per task{}\n\n",
+    let run = s
+        .run
+        .as_ref()
+        .map(|r| (r.dir.display().to_string(), r.step));
+    report::header(
+        s.kind.name(),
+        run.as_ref().map(|(d, step)| (d.as_str(), *step)),
         args.seed,
         args.episodes,
-        if args.full_budget {
-            ", full step budget"
-        } else {
-            ""
-        }
+        args.full_budget,
+        args.shard.unwrap_or_default(),
     )
+}
+
+/// Writes results.md, results.json and results.csv of `results` into `out`.
+fn write_results(out: &std::path::Path, results: &Results) -> anyhow::Result<()> {
+    eval::write_atomic(&out.join("results.md"), results.markdown().as_bytes())?;
+    eval::write_atomic(
+        &out.join("results.json"),
+        serde_json::to_string_pretty(results)?.as_bytes(),
+    )?;
+    eval::write_atomic(
+        &out.join("results.csv"),
+        report::csv(&results.tasks).as_bytes(),
+    )?;
+    eprintln!("wrote {}/results.{{md,json,csv}}", out.display());
+    Ok(())
 }
 
 fn evaluate(args: &EvalArgs) -> anyhow::Result<()> {
@@ -309,18 +338,8 @@ fn evaluate(args: &EvalArgs) -> anyhow::Result<()> {
     let tasks = eval::resolve_tasks(&s.tasks, args.repeat)?;
     let viz = args.viz.then(|| s.out.join("viz"));
     let results = run_tasks(args, &s, &tasks, viz.clone())?;
-    let md = format!("{}{}", header(&s, args), report::markdown(&results.tasks));
-    data::out!("{md}");
-    eval::write_atomic(&s.out.join("results.md"), md.as_bytes())?;
-    eval::write_atomic(
-        &s.out.join("results.json"),
-        serde_json::to_string_pretty(&results)?.as_bytes(),
-    )?;
-    eval::write_atomic(
-        &s.out.join("results.csv"),
-        report::csv(&results.tasks).as_bytes(),
-    )?;
-    eprintln!("wrote {}/results.{{md,json,csv}}", s.out.display());
+    data::out!("{}", results.markdown());
+    write_results(&s.out, &results)?;
     if let Some(v) = viz {
         eprintln!("slot overlays in {}", v.display());
     }
@@ -358,6 +377,16 @@ fn scaling(args: &EvalArgs, repeats: &[usize]) -> anyhow::Result<()> {
     )?;
     eprintln!("wrote {}/scaling.{{md,json}}", s.out.display());
     Ok(())
+}
+
+fn merge(paths: &[PathBuf], out: &std::path::Path) -> anyhow::Result<()> {
+    let parts = paths
+        .iter()
+        .map(|p| Results::load(p))
+        .collect::<Result<Vec<_>, _>>()?;
+    let merged = report::merge(&parts)?;
+    data::out!("{}", merged.markdown());
+    write_results(out, &merged)
 }
 
 fn compare(paths: &[PathBuf], out: Option<PathBuf>) -> anyhow::Result<()> {

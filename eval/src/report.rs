@@ -72,6 +72,9 @@ pub struct Results {
     pub episodes_per_task: usize,
     /// Whether every episode ran its whole step budget.
     pub full_budget: bool,
+    /// The shard these results cover (absent: the whole run).
+    #[serde(default, skip_serializing_if = "data::shard::Shard::is_whole")]
+    pub shard: data::shard::Shard,
     /// Per-task rows.
     pub tasks: Vec<TaskSummary>,
     /// Every episode.
@@ -104,6 +107,182 @@ impl Results {
         })?;
         Ok((file.clone(), r))
     }
+}
+
+/// The line above a results table: what was evaluated and how (`model runs/x (step 4000), seed
+/// 1000, 20 episodes per task, full step budget`), then a blank line.
+pub fn header(
+    policy: &str,
+    run: Option<(&str, u64)>,
+    seed: u64,
+    episodes: usize,
+    full_budget: bool,
+    shard: data::shard::Shard,
+) -> String {
+    let who = match run {
+        Some((dir, step)) => format!("model {dir} (step {step})"),
+        None => format!("{policy} policy"),
+    };
+    format!(
+        "{who}, seed {seed}, {episodes} episodes per task{}{}\n\n",
+        if full_budget {
+            ", full step budget"
+        } else {
+            ""
+        },
+        if shard.is_whole() {
+            String::new()
+        } else {
+            format!(
+                ", shard {shard} (episodes k with k mod {} = {})",
+                shard.count, shard.index
+            )
+        }
+    )
+}
+
+impl Results {
+    /// [`header`] of these results.
+    pub fn header(&self) -> String {
+        header(
+            &self.policy,
+            self.run.as_deref().zip(self.checkpoint_step),
+            self.seed,
+            self.episodes_per_task,
+            self.full_budget,
+            self.shard,
+        )
+    }
+
+    /// `results.md`: the header and the table.
+    pub fn markdown(&self) -> String {
+        format!("{}{}", self.header(), markdown(&self.tasks))
+    }
+}
+
+/// Joins the results of the shards `0/N … (N−1)/N` of one evaluation (each with the file it was
+/// read from, for errors) into the results of the unsharded evaluation: the same episodes, rows
+/// and order, as if it had run in one process. Refuses parts of different evaluations (policy,
+/// run, checkpoint, seed, episode count, protocol, tasks), a shard missing or given twice, and
+/// an episode missing, repeated or outside its shard.
+pub fn merge(parts: &[(PathBuf, Results)]) -> Result<Results, EvalError> {
+    let Some((first_path, first)) = parts.first() else {
+        return Err(EvalError::Argument("no results to merge".into()));
+    };
+    let bad = |path: &Path, message: String| EvalError::Results {
+        path: path.to_path_buf(),
+        message,
+    };
+    let count = first.shard.count;
+    let tasks: Vec<&str> = first.tasks.iter().map(|t| t.task.as_str()).collect();
+    let mut owner: Vec<Option<&Path>> = vec![None; count];
+    for (path, r) in parts {
+        let differs = [
+            ("policy", r.policy != first.policy),
+            ("run", r.run != first.run),
+            (
+                "checkpoint step",
+                r.checkpoint_step != first.checkpoint_step,
+            ),
+            ("seed", r.seed != first.seed),
+            (
+                "episodes per task",
+                r.episodes_per_task != first.episodes_per_task,
+            ),
+            ("full-budget protocol", r.full_budget != first.full_budget),
+            ("shard count", r.shard.count != count),
+            (
+                "tasks",
+                r.tasks
+                    .iter()
+                    .map(|t| t.task.as_str())
+                    .ne(tasks.iter().copied()),
+            ),
+        ];
+        if let Some((what, _)) = differs.iter().find(|(_, d)| *d) {
+            return Err(bad(
+                path,
+                format!(
+                    "not a shard of the same evaluation as {}: its {what} differs",
+                    first_path.display()
+                ),
+            ));
+        }
+        let i = r.shard.index;
+        if let Some(other) = owner[i] {
+            return Err(bad(
+                path,
+                format!(
+                    "shard {} is given twice (also {})",
+                    r.shard,
+                    other.display()
+                ),
+            ));
+        }
+        owner[i] = Some(path);
+        if let Some(e) = r.episodes.iter().find(|e| !r.shard.owns(e.episode)) {
+            return Err(bad(
+                path,
+                format!(
+                    "{} episode {} is not shard {}'s",
+                    e.task, e.episode, r.shard
+                ),
+            ));
+        }
+    }
+    if let Some(i) = owner.iter().position(Option::is_none) {
+        return Err(EvalError::Argument(format!(
+            "shard {i}/{count} is missing (give all {count} shards' results)"
+        )));
+    }
+    let n = first.episodes_per_task;
+    let mut rows = Vec::with_capacity(tasks.len());
+    let mut episodes = Vec::with_capacity(tasks.len() * n);
+    for task in &tasks {
+        let mut eps: Vec<(&Path, &EpisodeResult)> = parts
+            .iter()
+            .flat_map(|(p, r)| {
+                r.episodes
+                    .iter()
+                    .filter(|e| e.task == *task)
+                    .map(move |e| (p.as_path(), e))
+            })
+            .collect();
+        eps.sort_by_key(|(_, e)| e.episode);
+        if let Some((path, e)) = eps.iter().find(|(_, e)| e.episode >= n) {
+            return Err(bad(
+                path,
+                format!(
+                    "{task} episode {} is past the {n} episodes per task",
+                    e.episode
+                ),
+            ));
+        }
+        if let Some(w) = eps.windows(2).find(|w| w[0].1.episode == w[1].1.episode) {
+            return Err(bad(
+                w[1].0,
+                format!(
+                    "{task} episode {} appears twice (also in {})",
+                    w[1].1.episode,
+                    w[0].0.display()
+                ),
+            ));
+        }
+        if let Some(k) = (0..n).find(|&k| eps.get(k).is_none_or(|(_, e)| e.episode != k)) {
+            return Err(EvalError::Argument(format!(
+                "{task} episode {k} is in none of the shards' results"
+            )));
+        }
+        let eps: Vec<EpisodeResult> = eps.into_iter().map(|(_, e)| e.clone()).collect();
+        rows.push(summarize(task, &eps));
+        episodes.extend(eps);
+    }
+    Ok(Results {
+        shard: data::shard::Shard::WHOLE,
+        tasks: rows,
+        episodes,
+        ..first.clone()
+    })
 }
 
 /// Summarises the episodes of one task.
@@ -435,6 +614,7 @@ mod tests {
             seed: 0,
             episodes_per_task: 1,
             full_budget: false,
+            shard: data::shard::Shard::WHOLE,
             tasks: rows,
             episodes: vec![],
         };

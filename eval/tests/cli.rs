@@ -331,3 +331,47 @@ fn experiment_tables_from_the_ledger_alone() {
         "{err}"
     );
 }
+
+#[test]
+fn sharded_expert_evaluation_merges_into_the_unsharded_files() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = |name: &str| dir.path().join(name).to_str().unwrap().to_string();
+    let base = [
+        "--policy",
+        "expert",
+        "--tasks",
+        "t1,t3",
+        "--episodes",
+        "3",
+        "--seed",
+        "4",
+    ];
+    let run = |extra: &[&str]| {
+        let args: Vec<&str> = base.iter().copied().chain(extra.iter().copied()).collect();
+        let (code, _, err) = eval(&args);
+        assert_eq!(code, 0, "{err}");
+    };
+    run(&["--out", &out("whole")]);
+    run(&["--shard", "0/2", "--out", &out("s0")]);
+    run(&["--shard", "1/2", "--out", &out("s1")]);
+    let (code, stdout, err) = eval(&["merge", &out("s1"), &out("s0"), "--out", &out("merged")]);
+    assert_eq!(code, 0, "{err}");
+    assert!(stdout.contains("| libero_mem/t3 | 3 |"), "{stdout}");
+    for f in ["results.md", "results.json", "results.csv"] {
+        assert_eq!(
+            std::fs::read_to_string(dir.path().join("whole").join(f)).unwrap(),
+            std::fs::read_to_string(dir.path().join("merged").join(f)).unwrap(),
+            "{f}"
+        );
+    }
+    let (code, _, err) = eval(&["merge", &out("s0"), "--out", &out("bad")]);
+    assert_eq!(code, 2, "{err}");
+    assert!(err.contains("shard 1/2 is missing"), "{err}");
+    assert!(
+        !dir.path().join("bad").exists(),
+        "no output on a refused merge"
+    );
+    let (code, _, err) = eval(&["--policy", "zero", "--shard", "2/2", "--out", &out("x")]);
+    assert_eq!(code, 2, "{err}");
+    assert!(err.contains("expected I/N"), "{err}");
+}

@@ -159,3 +159,69 @@ fn hold_steps_record_the_expert_standing_still_after_the_goal() {
         assert_eq!(s.progress.satisfied, s.progress.total, "step {t}");
     }
 }
+
+#[test]
+fn shards_together_record_what_one_run_records() {
+    use data::shard::Shard;
+    let task = registry::resolve("t1").unwrap();
+    let cfg = GenerateConfig {
+        episodes: 3,
+        val: 1,
+        seed: 11,
+        image_size: 32,
+        ..GenerateConfig::default()
+    };
+    let whole = tempfile::tempdir().unwrap();
+    generate(&task, whole.path(), &cfg, &|_| {}).unwrap();
+    let sharded = tempfile::tempdir().unwrap();
+    // Another process's temporary file: a shard must leave it alone.
+    let busy = sharded.path().join(".episode-other-shard.mcap.tmp");
+    std::fs::create_dir_all(sharded.path()).unwrap();
+    std::fs::write(&busy, b"being written").unwrap();
+    for (index, owned) in [(1, 1), (0, 2)] {
+        let shard = Shard::new(index, 2).unwrap();
+        let n = sim::generate::generate_episodes(
+            &task,
+            sharded.path(),
+            &GenerateConfig {
+                shard,
+                ..cfg.clone()
+            },
+            &|_| {},
+        )
+        .unwrap();
+        assert_eq!(n, owned);
+        assert!(busy.exists(), "shard {shard} removed another's temporary");
+    }
+    assert!(
+        !sharded.path().join(data::index::INDEX_FILE).exists(),
+        "a shard writes no index"
+    );
+    let refused = generate(
+        &task,
+        sharded.path(),
+        &GenerateConfig {
+            shard: Shard::new(0, 2).unwrap(),
+            ..cfg.clone()
+        },
+        &|_| {},
+    )
+    .unwrap_err();
+    assert!(refused.to_string().contains("writes no index"), "{refused}");
+    // The unsharded pass finds every episode, records none, writes the index, cleans up.
+    let index = generate(&task, sharded.path(), &cfg, &|_| {}).unwrap();
+    assert_eq!(index.episodes.len(), 3);
+    assert!(!busy.exists());
+    for name in [
+        "episode_00000.mcap",
+        "episode_00001.mcap",
+        "episode_00002.mcap",
+        "index.json",
+    ] {
+        assert_eq!(
+            std::fs::read(whole.path().join(name)).unwrap(),
+            std::fs::read(sharded.path().join(name)).unwrap(),
+            "{name}"
+        );
+    }
+}

@@ -29,18 +29,34 @@ pub fn run(task: String, out: PathBuf, cfg: sim::generate::GenerateConfig) -> an
         );
         bar.set_prefix(t.id.clone());
         let start = std::time::Instant::now();
-        let index = sim::generate::generate(t, &dir, &cfg, &|p| {
+        let on_progress = |p: sim::generate::GenerateProgress| {
             bar.set_position(p.done as u64);
             bar.set_message(format!(
                 "{} ok, {} failed attempts",
                 p.successes, p.failures
             ));
-        })
-        .map_err(|e| match e {
+        };
+        let classify = |e| match e {
             sim::generate::GenerateError::Argument(m) => anyhow::Error::new(BadInput(m)),
             e if e.is_bad_input() => anyhow::Error::new(BadInput(e.to_string())),
             other => other.into(),
-        })?;
+        };
+        if !cfg.shard.is_whole() {
+            bar.set_length(cfg.shard.items(episodes).len() as u64);
+            let n =
+                sim::generate::generate_episodes(t, &dir, &cfg, &on_progress).map_err(classify)?;
+            bar.finish_and_clear();
+            data::outln!(
+                "{}: shard {}: {n} episodes in {} in {:.1} s (no index: once every shard is done, \
+                 the same command without --shard writes it)",
+                t.id,
+                cfg.shard,
+                dir.display(),
+                start.elapsed().as_secs_f64()
+            );
+            continue;
+        }
+        let index = sim::generate::generate(t, &dir, &cfg, &on_progress).map_err(classify)?;
         bar.finish_and_clear();
         let steps: usize = index.episodes.iter().map(|e| e.length).sum();
         data::outln!(
@@ -52,7 +68,7 @@ pub fn run(task: String, out: PathBuf, cfg: sim::generate::GenerateConfig) -> an
             start.elapsed().as_secs_f64()
         );
     }
-    if tasks.len() > 1 {
+    if tasks.len() > 1 && cfg.shard.is_whole() {
         // Every task is recorded above: only the suite's index is left.
         let index = sim::generate::write_index(&out, &cfg)?;
         data::outln!(

@@ -97,6 +97,11 @@ pub enum Command {
         /// size, expert settings; recorded in its generation.json) instead of refusing.
         #[arg(long)]
         force: bool,
+        /// Record only shard I of N (episodes k with k mod N = I; 0 ≤ I < N), e.g. one task of
+        /// a Slurm array job. Shards may share --out; once all are done, the same command without
+        /// --shard writes the index (it finds every episode and records none).
+        #[arg(long)]
+        shard: Option<data::shard::Shard>,
     },
     /// Render the agentview of every shipped task at one seed into a labelled contact sheet.
     Sheet {
@@ -271,6 +276,7 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
             plain_expert,
             hold_steps,
             force,
+            shard,
         } => generate::run(
             task,
             out,
@@ -282,6 +288,7 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
                 image_size: size,
                 expert: sim::generate::expert_config(plain_expert, hold_steps),
                 force,
+                shard: shard.unwrap_or_default(),
                 ..Default::default()
             },
         ),

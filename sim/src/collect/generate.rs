@@ -222,6 +222,8 @@ pub struct GenerateConfig {
     pub expert: crate::expert::ExpertConfig,
     /// Replace the episodes of a directory generated with other parameters (else an error).
     pub force: bool,
+    /// Record only this shard's episodes (k mod N = I; see [`generate_episodes`]).
+    pub shard: data::shard::Shard,
 }
 
 impl Default for GenerateConfig {
@@ -235,6 +237,7 @@ impl Default for GenerateConfig {
             writer: data::WriterOptions::default(),
             expert: crate::expert::ExpertConfig::default(),
             force: false,
+            shard: data::shard::Shard::WHOLE,
         }
     }
 }
@@ -342,12 +345,36 @@ pub fn record_episode(
 }
 
 /// Generates `cfg.episodes` episodes of `task` into `dir` (skipping finished ones) and writes the index.
+/// A sharded `cfg` is refused: shards record with [`generate_episodes`], and the index is written
+/// once all are done (by this function, which then finds every episode and records none).
 pub fn generate(
     task: &TaskSpec,
     dir: &Path,
     cfg: &GenerateConfig,
     on_progress: &(dyn Fn(GenerateProgress) + Sync),
 ) -> Result<data::DatasetIndex, GenerateError> {
+    if !cfg.shard.is_whole() {
+        return Err(GenerateError::Argument(format!(
+            "shard {}: a shard records episodes but writes no index (generate_episodes)",
+            cfg.shard
+        )));
+    }
+    generate_episodes(task, dir, cfg, on_progress)?;
+    write_index(dir, cfg)
+}
+
+/// Records the episodes of `cfg.shard` among `cfg.episodes` of `task` into `dir`, skipping
+/// finished ones; returns how many the shard owns. Episode k is the same file whichever shard
+/// records it, so shards running at once into one directory (a shared file system) leave it as
+/// an unsharded run would, short of the index. A shard leaves other processes' temporary files
+/// alone (they may be recording); the unsharded pass that writes the index removes a killed
+/// shard's leftovers.
+pub fn generate_episodes(
+    task: &TaskSpec,
+    dir: &Path,
+    cfg: &GenerateConfig,
+    on_progress: &(dyn Fn(GenerateProgress) + Sync),
+) -> Result<usize, GenerateError> {
     if cfg.episodes == 0 || cfg.val >= cfg.episodes || cfg.workers == 0 {
         return Err(GenerateError::Argument(format!(
             "need episodes ≥ 1, val < episodes and workers ≥ 1 (got {} episodes, {} val, {} workers)",
@@ -355,8 +382,11 @@ pub fn generate(
         )));
     }
     std::fs::create_dir_all(dir).map_err(|e| data::DataError::io(dir, e))?;
-    clean_temporaries(dir)?;
+    if cfg.shard.is_whole() {
+        clean_temporaries(dir)?;
+    }
     claim_dir(dir, &GenerationRecord::of(task, cfg), cfg.force)?;
+    let items = cfg.shard.items(cfg.episodes);
     let progress = Mutex::new(GenerateProgress::default());
     let report = |f: &dyn Fn(&mut GenerateProgress)| {
         let mut p = progress.lock().unwrap_or_else(|e| e.into_inner());
@@ -365,7 +395,8 @@ pub fn generate(
     };
     // Each worker builds its simulator only when it has an episode to record (finished episodes
     // of an interrupted run are skipped).
-    let work = |env: &mut Option<Env>, k: usize| -> Result<(), GenerateError> {
+    let work = |env: &mut Option<Env>, i: usize| -> Result<(), GenerateError> {
+        let k = items[i];
         let path = episode_path(dir, k);
         if path.exists() {
             report(&|p| p.done += 1);
@@ -399,13 +430,13 @@ pub fn generate(
         })
     };
     data::pool::for_each(
-        cfg.episodes,
+        items.len(),
         cfg.workers,
         || Ok(None),
         work,
         || GenerateError::Argument("a generation worker panicked".into()),
     )?;
-    write_index(dir, cfg)
+    Ok(items.len())
 }
 
 /// Generates a suite dataset: `cfg.episodes` episodes of every task of `tasks` into one subfolder
