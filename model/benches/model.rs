@@ -8,6 +8,11 @@
 //!    on a shared machine hit them alike. Target for e_slotssm: latency(700)/latency(1) ≤ 1.1 and
 //!    ≤ 20 ms per step.
 //!
+//! 3. The full preset's memory (`BENCH_FULL=1`, or `BENCH_ONLY=full`): parameters, training
+//!    state (weights, gradients, AdamW moments), and the activation memory of forward+backward
+//!    measured as peak resident memory at batch 1 over 2, 4 and 8 frames (a fresh process each),
+//!    extrapolated linearly to batch 1 and 8 over T = 32 (the GPU window).
+//!
 //! Run: `cargo bench -p model` (add `--profile dev` to reuse the dev build: dependencies are
 //! optimised there too). Environment: `BENCH_QUICK=1` runs fewer repetitions.
 
@@ -149,16 +154,143 @@ fn streaming_table(variants: &[&str], reps: usize) -> Vec<StepFigures> {
     steppers.iter().map(Stepper::figures).collect()
 }
 
+/// A line of this process's `/proc/self/status` in bytes (`VmHWM`: peak resident memory,
+/// `VmRSS`: current), or None off Linux.
+fn proc_status_bytes(key: &str) -> Option<u64> {
+    let status = std::fs::read_to_string("/proc/self/status").ok()?;
+    let line = status.lines().find(|l| l.starts_with(key))?;
+    let kib: u64 = line.split_whitespace().nth(1)?.parse().ok()?;
+    Some(kib * 1024)
+}
+
+/// The full preset (e_slotssm) with its vocabulary.
+fn full_config() -> ModelConfig {
+    ModelConfig::full(Variant::from_name("e_slotssm").expect("known"))
+        .with_vocab_from([INSTRUCTION])
+}
+
+/// Child process of [`full_memory`]: one forward+backward of the full preset at batch 1 over
+/// `t` frames; prints `seconds peak_bytes_above_the_built_model`.
+fn full_memory_child(t: usize) {
+    let device = Device::flex().autodiff();
+    device.seed(0);
+    let cfg = full_config();
+    let model = PolicyModel::new(&cfg, &device).expect("model");
+    let tok = Tokenizer::new(&cfg.text);
+    let batch = WindowBatch {
+        obs: Tensor::random(
+            [1, t, 3, 224, 224],
+            Distribution::Uniform(0.0, 1.0),
+            &device,
+        )
+        .into(),
+        actions: Tensor::random([1, t, 8, 7], Distribution::Uniform(-1.0, 1.0), &device),
+        frame_mask: Tensor::ones([1, t], &device),
+        action_mask: None,
+        instruction: tok.encode_batch(&[INSTRUCTION], &device),
+        subgoal: None,
+    };
+    let base = proc_status_bytes("VmRSS:").unwrap_or(0);
+    let start = Instant::now();
+    let (_, losses) = model.forward(&batch).expect("forward");
+    let grads = losses.total.clone().backward();
+    sync(losses.total);
+    drop(grads);
+    let peak = proc_status_bytes("VmHWM:").unwrap_or(0);
+    println!(
+        "{} {}",
+        start.elapsed().as_secs_f64(),
+        peak.saturating_sub(base)
+    );
+}
+
+/// The full preset's parameters and memory: activations of forward+backward measured as the
+/// peak resident memory above the built model, each window size in a fresh process (an
+/// allocator keeps freed memory, so in one process a second measurement reads low), then a
+/// line through the measurements extrapolated to T = 32 at batch 1 and 8.
+fn full_memory() {
+    let device = Device::flex();
+    let model = PolicyModel::new(&full_config(), &device).expect("model");
+    let params = model.num_params();
+    let gib = |b: f64| b / (1u64 << 30) as f64;
+    let state = params as f64 * 4.0 * 4.0;
+    println!("# Full preset (e_slotssm, 224x224, K=16, D=512), flex CPU, 1 thread");
+    println!(
+        "parameters {params} ({:.2} GiB f32); weights + gradients + AdamW moments {:.2} GiB",
+        gib(params as f64 * 4.0),
+        gib(state)
+    );
+    let exe = std::env::current_exe().expect("bench executable");
+    let mut points = Vec::new();
+    for t in [2usize, 4, 8] {
+        let out = std::process::Command::new(&exe)
+            .env("BENCH_FULL_T", t.to_string())
+            .output()
+            .expect("child bench");
+        let text = String::from_utf8_lossy(&out.stdout);
+        let nums: Vec<f64> = text
+            .split_whitespace()
+            .filter_map(|w| w.parse().ok())
+            .collect();
+        let [secs, bytes] = nums[..] else {
+            println!(
+                "B=1 T={t}: not measured ({})",
+                String::from_utf8_lossy(&out.stderr).trim()
+            );
+            return;
+        };
+        println!(
+            "B=1 T={t}: forward+backward {secs:.1} s, peak resident memory above the model {:.2} GiB",
+            gib(bytes)
+        );
+        points.push((t as f64, bytes));
+    }
+    // Least-squares line bytes = fixed + per_frame · T through the three points.
+    let n = points.len() as f64;
+    let (mt, mb) = (
+        points.iter().map(|p| p.0).sum::<f64>() / n,
+        points.iter().map(|p| p.1).sum::<f64>() / n,
+    );
+    let per_frame = points.iter().map(|p| (p.0 - mt) * (p.1 - mb)).sum::<f64>()
+        / points.iter().map(|p| (p.0 - mt).powi(2)).sum::<f64>();
+    let fixed = (mb - per_frame * mt).max(0.0);
+    println!(
+        "activations ≈ {:.2} GiB + {:.3} GiB per frame (per batch element)",
+        gib(fixed),
+        gib(per_frame)
+    );
+    for b in [1usize, 8] {
+        let act = b as f64 * (fixed + per_frame * 32.0);
+        println!(
+            "estimate B={b} T=32: activations {:.1} GiB + training state {:.2} GiB = {:.1} GiB",
+            gib(act),
+            gib(state),
+            gib(act + state)
+        );
+    }
+}
+
 fn main() {
     // One core for the per-step figures (flex parallelises with rayon).
     rayon::ThreadPoolBuilder::new()
         .num_threads(1)
         .build_global()
         .expect("rayon pool");
+    if let Some(t) = std::env::var("BENCH_FULL_T")
+        .ok()
+        .and_then(|t| t.parse().ok())
+    {
+        full_memory_child(t);
+        return;
+    }
     let quick = std::env::var("BENCH_QUICK").is_ok();
     let (train_reps, step_reps) = if quick { (1, 5) } else { (3, 25) };
 
     let only = std::env::var("BENCH_ONLY").ok();
+    if only.as_deref() == Some("full") {
+        full_memory();
+        return;
+    }
     if let Some(v) = &only {
         let f = streaming_table(&[v.as_str()], step_reps).remove(0);
         println!(
@@ -227,4 +359,8 @@ fn main() {
         f.floats[2],
         if constant { "constant" } else { "GROWS" }
     );
+    if std::env::var("BENCH_FULL").is_ok() {
+        println!();
+        full_memory();
+    }
 }

@@ -499,6 +499,41 @@ mod tests {
         );
     }
 
+    /// The full preset (model.md §0: 224², K = 16, D = 512, 3 SSM blocks, 6 decoder layers)
+    /// builds and runs one forward + backward at batch 1 over a reduced window on the CPU, every
+    /// parameter getting a gradient (the GPU window is 32 frames; `cargo bench -p model` prints
+    /// the memory estimate for it).
+    #[test]
+    fn full_preset_trains_at_batch_1() {
+        let (_guard, device) = test_autodiff_device();
+        device.seed(2);
+        let cfg = ModelConfig::full(Variant::from_name("e_slotssm").unwrap())
+            .with_vocab_from(INSTRUCTIONS.iter().copied().chain(["bowl", "drawer"]));
+        let model = PolicyModel::new(&cfg, &device).unwrap();
+        let params = model.num_params();
+        assert!(
+            params > 30_000_000,
+            "full preset has only {params} parameters"
+        );
+        let t = 3; // two valid frames (the helper pads the last one)
+        let (out, losses) = model.forward(&batch(&cfg, 1, t, &device)).unwrap();
+        assert_eq!(out.actions.dims(), [1, t, 8, 7]);
+        assert_eq!(out.slots.as_ref().unwrap().dims(), [1, t, 16, 512]);
+        assert_eq!(out.masks.as_ref().unwrap().dims(), [1, t, 16, 196]);
+        let total = scalar(losses.total.clone());
+        assert!(total.is_finite() && total > 0.0, "loss {total}");
+        let grads = losses.total.backward();
+        let mut check = GradCheck {
+            grads: &grads,
+            path: Vec::new(),
+            visited: 0,
+            bad: Vec::new(),
+        };
+        model.visit(&mut check);
+        assert!(check.visited > 100, "visited only {}", check.visited);
+        assert!(check.bad.is_empty(), "no gradient for {:?}", check.bad);
+    }
+
     #[test]
     fn every_parameter_gets_a_gradient_e_slotssm() {
         check_all_gradients("e_slotssm");
