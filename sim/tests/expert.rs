@@ -173,3 +173,66 @@ fn t7_moves_first_the_bowl_nearer_the_empty_plate() {
         "both orders occur: {chosen:?}"
     );
 }
+
+#[test]
+fn t7_with_the_gripper_rule_moves_first_the_bowl_nearer_the_hand() {
+    // `BranchRule::Gripper`: the bowl nearer (in the table plane) to the hand at the start goes
+    // first; on some seeds that is the other bowl than the destination rule's.
+    let t7 = registry::resolve("t7").unwrap();
+    let branches = subgoal_branches(&t7.problem.goal);
+    let mut env = Env::from_task(&t7, state_only()).unwrap();
+    let cfg = ExpertConfig {
+        branch_rule: sim::expert::BranchRule::Gripper,
+        ..ExpertConfig::default()
+    };
+    let (mut chosen, mut differ) = ([0usize; 2], 0);
+    for seed in 0..8 {
+        let obs = env.reset(seed).unwrap();
+        let scene = env.scene().unwrap();
+        let to_hand = |b: &Vec<Vec<sim::task::Atom>>| {
+            let p = obs.objects[scene.instance(&b[0][0].args[0]).unwrap()].pos;
+            (p[0] - obs.eef_pos[0]).hypot(p[1] - obs.eef_pos[1])
+        };
+        let d: Vec<f64> = branches.iter().map(to_hand).collect();
+        let nearer = usize::from(d[1] < d[0]);
+        let mut ex = Expert::with_config(&t7, seed, cfg.clone());
+        ex.act(&env, &obs).unwrap();
+        assert_eq!(
+            ex.branch, nearer,
+            "seed {seed}: distances to the hand {d:?}"
+        );
+        chosen[ex.branch] += 1;
+        let mut by_destination = Expert::new(&t7, seed);
+        by_destination.act(&env, &obs).unwrap();
+        differ += usize::from(by_destination.branch != ex.branch);
+    }
+    assert!(
+        chosen[0] > 0 && chosen[1] > 0,
+        "both orders occur: {chosen:?}"
+    );
+    assert!(differ > 0, "the two rules never differ on seeds 0..8");
+    assert_eq!("gripper".parse(), Ok(sim::expert::BranchRule::Gripper));
+    assert!("nearest".parse::<sim::expert::BranchRule>().is_err());
+}
+
+#[test]
+fn t10_keeps_its_basket_under_the_gripper_rule() {
+    // Both T10 branches move the cheese first: the rule falls back to the destination.
+    let spec = registry::resolve("t10").unwrap();
+    let mut env = Env::from_task(&spec, state_only()).unwrap();
+    for seed in 0..4 {
+        let obs = env.reset(seed).unwrap();
+        let mut a = Expert::new(&spec, seed);
+        a.act(&env, &obs).unwrap();
+        let mut b = Expert::with_config(
+            &spec,
+            seed,
+            ExpertConfig {
+                branch_rule: sim::expert::BranchRule::Gripper,
+                ..ExpertConfig::default()
+            },
+        );
+        b.act(&env, &obs).unwrap();
+        assert_eq!(a.branch, b.branch, "seed {seed}");
+    }
+}

@@ -104,6 +104,29 @@ fn generates_resumes_and_repeats_byte_for_byte() {
             .len(),
         4
     );
+    // A record from before the branch rule existed reads as the destination rule; asking for the
+    // gripper rule in that directory is refused, naming the difference.
+    let rec = c.path().join(sim::generate::GENERATION_JSON);
+    let mut json: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&rec).unwrap()).unwrap();
+    assert_eq!(json["branch_rule"], "destination");
+    json.as_object_mut().unwrap().remove("branch_rule");
+    std::fs::write(&rec, json.to_string()).unwrap();
+    generate(&task, c.path(), &more, &|_| {}).unwrap();
+    let gripper = GenerateConfig {
+        expert: sim::expert::ExpertConfig {
+            branch_rule: sim::expert::BranchRule::Gripper,
+            ..more.expert.clone()
+        },
+        ..more.clone()
+    };
+    let m = generate(&task, c.path(), &gripper, &|_| {})
+        .unwrap_err()
+        .to_string();
+    assert!(
+        m.contains("branch_rule \"destination\" → \"gripper\""),
+        "{m}"
+    );
     // Bad arguments.
     let e = generate(&task, a.path(), &GenerateConfig { val: 3, ..cfg }, &|_| {}).unwrap_err();
     assert!(e.to_string().contains("val < episodes"), "{e}");

@@ -102,6 +102,11 @@ pub enum Command {
         /// --shard writes the index (it finds every episode and records none).
         #[arg(long)]
         shard: Option<data::shard::Shard>,
+        /// How the expert picks the branch of an `Or` goal (which bowl moves first in T7/T8):
+        /// `destination` (the object nearest to where it goes) or `gripper` (the object nearest
+        /// to the hand; ties by destination).
+        #[arg(long, default_value = "destination")]
+        branch_rule: sim::expert::BranchRule,
     },
     /// Render the agentview of every shipped task at one seed into a labelled contact sheet.
     Sheet {
@@ -277,6 +282,7 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
             hold_steps,
             force,
             shard,
+            branch_rule,
         } => generate::run(
             task,
             out,
@@ -286,7 +292,10 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
                 seed,
                 workers,
                 image_size: size,
-                expert: sim::generate::expert_config(plain_expert, hold_steps),
+                expert: sim::expert::ExpertConfig {
+                    branch_rule,
+                    ..sim::generate::expert_config(plain_expert, hold_steps)
+                },
                 force,
                 shard: shard.unwrap_or_default(),
                 ..Default::default()

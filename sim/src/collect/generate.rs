@@ -76,6 +76,10 @@ pub struct GenerationRecord {
     pub chunk_size: u64,
     /// zstd level.
     pub zstd_level: u32,
+    /// How the expert chose `Or` branches (absent in records from before the choice existed:
+    /// the destination rule).
+    #[serde(default)]
+    pub branch_rule: crate::expert::BranchRule,
 }
 
 impl GenerationRecord {
@@ -95,6 +99,7 @@ impl GenerationRecord {
             },
             chunk_size: cfg.writer.chunk_size,
             zstd_level: cfg.writer.zstd_level,
+            branch_rule: cfg.expert.branch_rule,
         }
     }
 

@@ -39,6 +39,8 @@ pub struct ExpertConfig {
     pub variation: bool,
     /// Control steps to keep observing after the plan has finished (the goal must still hold).
     pub hold_steps: usize,
+    /// How an `Or` goal's branch is chosen (T7's and T8's bowl orders, T9/T10's baskets).
+    pub branch_rule: BranchRule,
 }
 
 impl Default for ExpertConfig {
@@ -47,6 +49,36 @@ impl Default for ExpertConfig {
             action_noise: 0.03,
             variation: true,
             hold_steps: 5,
+            branch_rule: BranchRule::Destination,
+        }
+    }
+}
+
+/// The rule that picks an `Or` goal's branch when every branch starts by putting an object in
+/// or on something; both are rules the scene shows (unlike a draw from the seed).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum BranchRule {
+    /// The branch whose first object is nearest, in the table plane, to where it goes (T7: the
+    /// bowl nearer the empty plate first). A relation of three objects.
+    #[default]
+    Destination,
+    /// The branch whose first object is nearest to the gripper at the start (T7: the bowl nearer
+    /// the hand first), ties (branches moving the same object first: T9/T10) broken by
+    /// [`BranchRule::Destination`]. Each object's own offset to the hand decides.
+    Gripper,
+}
+
+impl std::str::FromStr for BranchRule {
+    type Err = String;
+
+    fn from_str(s: &str) -> Result<Self, String> {
+        match s {
+            "destination" => Ok(BranchRule::Destination),
+            "gripper" => Ok(BranchRule::Gripper),
+            other => Err(format!(
+                "branch rule `{other}`: expected `destination` or `gripper`"
+            )),
         }
     }
 }
@@ -147,6 +179,7 @@ impl Expert {
             self.planned = true;
             self.init_rot = Some(quat_mat(obs.eef_quat));
             let mut b = plan::Builder::new(scene, env, &mut self.rng, self.cfg.variation);
+            b.branch_rule(self.cfg.branch_rule, obs.eef_pos);
             let (ops, branch) = b.build(&self.task);
             self.ops = ops;
             self.branch = branch;
@@ -528,7 +561,9 @@ while let Some(action) = expert.act(&env, &obs) {             // None: demonstra
 * **Plan.** On the first `act` the goal is split into subgoals (`subgoal_branches`; an `Or` branch is
   chosen by where things are: the branch whose first object is nearest to where it goes — T7: the bowl
   nearer the empty plate moves first; T9/T10: the cheese goes into the basket nearest to it; a rule a
-  policy can see, unlike a draw from the seed) and turned into a queue of ops: move (proportional, gain ≈ 12 action units per
+  policy can see, unlike a draw from the seed; `ExpertConfig::branch_rule = Gripper`, `sim generate
+  --branch-rule gripper`, takes instead the first object nearest to the hand, ties by destination, so
+  that each object's own offset to the hand decides T7's first bowl) and turned into a queue of ops: move (proportional, gain ≈ 12 action units per
   metre, to a live target: a point on an object, or *carry* — the held object's origin to a destination),
   yaw, gripper open/close (10–12 steps, fully closed before lifting), hold, wait for the tracker.
 * **Grasps.** Bowl: pinch the rim wall on the ±y side whose neighbourhood is freer (the 20 cm hand box is

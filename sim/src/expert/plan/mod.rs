@@ -60,6 +60,8 @@ pub(super) struct Builder<'a> {
     into_drawer: bool,
     /// Where the last object was set down (the hand is above it when the next grasp starts).
     last_dest: Option<[f64; 3]>,
+    /// How an `Or` branch is chosen, with the hand's position at the start.
+    branch_rule: (super::BranchRule, [f64; 3]),
 }
 
 impl<'a> Builder<'a> {
@@ -83,7 +85,13 @@ impl<'a> Builder<'a> {
             into_drawer: false,
             next_dest: None,
             last_dest: None,
+            branch_rule: (super::BranchRule::Destination, [0.0; 3]),
         }
+    }
+
+    /// Chooses `Or` branches by `rule`, the hand being at `eef` (world frame) at the start.
+    pub(super) fn branch_rule(&mut self, rule: super::BranchRule, eef: [f64; 3]) {
+        self.branch_rule = (rule, eef);
     }
 
     fn inst(&self, name: &str) -> Option<usize> {
@@ -172,16 +180,19 @@ impl<'a> Builder<'a> {
     }
 
     /// The `Or` branch to follow. When every branch starts by putting an object in or on something
-    /// (T7's two bowl orders, T9/T10's two baskets), the branch whose first object is nearest, in
-    /// the table plane, to where it goes (ties: file order). That is a rule the scene shows, so a
-    /// policy that sees the objects can tell which branch its demonstrations follow; a draw from
-    /// the seed cannot be told apart (T7's two bowls look alike and carry no instance id). Other
-    /// goals: a branch drawn from the seed.
+    /// (T7's two bowl orders, T8's, T9/T10's two baskets), by [`super::BranchRule`]: the branch whose
+    /// first object is nearest, in the table plane, to where it goes, or (`Gripper`) nearest to
+    /// the hand, ties broken by the destination (and then file order). Both are rules the scene
+    /// shows, so a policy that sees the objects can tell which branch its demonstrations follow; a
+    /// draw from the seed cannot be told apart (T7's two bowls look alike and carry no instance
+    /// id). Other goals: a branch drawn from the seed.
     fn choose_branch(&mut self, branches: &[Vec<Vec<Atom>>]) -> usize {
         if branches.len() <= 1 {
             return 0;
         }
-        let first_move = |b: &Vec<Vec<Atom>>| -> Option<f64> {
+        let (rule, eef) = self.branch_rule;
+        // (distance² to the hand (Gripper rule) or 0, distance² to the destination).
+        let first_move = |b: &Vec<Vec<Atom>>| -> Option<(f64, f64)> {
             let a = b.first()?.first()?;
             if !matches!(a.predicate, Predicate::In | Predicate::On) || a.args.len() < 2 {
                 return None;
@@ -194,13 +205,18 @@ impl<'a> Builder<'a> {
                     .data()
                     .site_pos(self.scene.regions.get(&a.args[1])?.site?),
             };
-            Some((p[0] - dest[0]).powi(2) + (p[1] - dest[1]).powi(2))
+            let plane = |q: [f64; 3]| (p[0] - q[0]).powi(2) + (p[1] - q[1]).powi(2);
+            let hand = match rule {
+                super::BranchRule::Destination => 0.0,
+                super::BranchRule::Gripper => plane(eef),
+            };
+            Some((hand, plane(dest)))
         };
-        let distances: Option<Vec<f64>> = branches.iter().map(first_move).collect();
+        let distances: Option<Vec<(f64, f64)>> = branches.iter().map(first_move).collect();
         if let Some(d) = distances {
             let mut best = 0;
-            for (k, &dk) in d.iter().enumerate() {
-                if dk < d[best] {
+            for (k, dk) in d.iter().enumerate() {
+                if dk.0 < d[best].0 || (dk.0 == d[best].0 && dk.1 < d[best].1) {
                     best = k;
                 }
             }
