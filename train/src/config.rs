@@ -115,6 +115,14 @@ pub struct GenerateSpec {
     /// (`sim generate --hold-steps`; by default the recording ends 10 steps after the goal).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub hold_steps: Option<usize>,
+    /// How the expert picks an `Or` goal's branch (`sim generate --branch-rule`): `destination`
+    /// (default) or `gripper` (T7/T8: the bowl nearest the hand moves first).
+    #[serde(default, skip_serializing_if = "is_default_branch_rule")]
+    pub branch_rule: sim::expert::BranchRule,
+}
+
+fn is_default_branch_rule(r: &sim::expert::BranchRule) -> bool {
+    *r == sim::expert::BranchRule::default()
 }
 
 fn default_camera() -> usize {

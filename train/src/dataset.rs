@@ -72,7 +72,10 @@ pub fn generate_dataset(spec: &GenerateSpec, dir: &Path, progress: bool) -> Resu
         seed: spec.seed,
         workers,
         image_size: spec.image_size,
-        expert: sim::generate::expert_config(spec.plain_expert, spec.hold_steps),
+        expert: sim::expert::ExpertConfig {
+            branch_rule: spec.branch_rule,
+            ..sim::generate::expert_config(spec.plain_expert, spec.hold_steps)
+        },
         ..Default::default()
     };
     let bar = if progress {
