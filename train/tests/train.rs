@@ -307,6 +307,7 @@ fn generate_spec(task: &str) -> train::config::GenerateSpec {
         workers: None,
         plain_expert: false,
         hold_steps: None,
+        branch_rule: Default::default(),
     }
 }
 
