@@ -3,6 +3,7 @@
 use rand::Rng;
 use rand_chacha::ChaCha8Rng;
 
+use crate::expert::branch::BranchRule;
 use crate::expert::op::{Op, Point, Target};
 use crate::task::{Atom, Category, Goal, Predicate, TaskSpec};
 use crate::world::env::Env;
@@ -61,7 +62,7 @@ pub(super) struct Builder<'a> {
     /// Where the last object was set down (the hand is above it when the next grasp starts).
     last_dest: Option<[f64; 3]>,
     /// How an `Or` branch is chosen, with the hand's position at the start.
-    branch_rule: (super::BranchRule, [f64; 3]),
+    branch_rule: (BranchRule, [f64; 3]),
 }
 
 impl<'a> Builder<'a> {
@@ -85,12 +86,12 @@ impl<'a> Builder<'a> {
             into_drawer: false,
             next_dest: None,
             last_dest: None,
-            branch_rule: (super::BranchRule::Destination, [0.0; 3]),
+            branch_rule: (BranchRule::Destination, [0.0; 3]),
         }
     }
 
     /// Chooses `Or` branches by `rule`, the hand being at `eef` (world frame) at the start.
-    pub(super) fn branch_rule(&mut self, rule: super::BranchRule, eef: [f64; 3]) {
+    pub(super) fn branch_rule(&mut self, rule: BranchRule, eef: [f64; 3]) {
         self.branch_rule = (rule, eef);
     }
 
@@ -180,7 +181,7 @@ impl<'a> Builder<'a> {
     }
 
     /// The `Or` branch to follow. When every branch starts by putting an object in or on something
-    /// (T7's two bowl orders, T8's, T9/T10's two baskets), by [`super::BranchRule`]: the branch whose
+    /// (T7's two bowl orders, T8's, T9/T10's two baskets), by [`BranchRule`]: the branch whose
     /// first object is nearest, in the table plane, to where it goes, or (`Gripper`) nearest to
     /// the hand, ties broken by the destination (and then file order). Both are rules the scene
     /// shows, so a policy that sees the objects can tell which branch its demonstrations follow; a
@@ -207,8 +208,8 @@ impl<'a> Builder<'a> {
             };
             let plane = |q: [f64; 3]| (p[0] - q[0]).powi(2) + (p[1] - q[1]).powi(2);
             let hand = match rule {
-                super::BranchRule::Destination => 0.0,
-                super::BranchRule::Gripper => plane(eef),
+                BranchRule::Destination => 0.0,
+                BranchRule::Gripper => plane(eef),
             };
             Some((hand, plane(dest)))
         };
