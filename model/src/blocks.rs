@@ -192,7 +192,62 @@ impl GruCell {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::test_device;
+    use crate::{test_autodiff_device, test_device};
+
+    /// A Linear's weight and bias gradients are the same whether its input is `[B, T, K, D]` or
+    /// the same numbers reshaped to `[B·T, K, D]` or `[B·T·K, D]` (the oracle slots project 4-d
+    /// token tensors, the dense tokens 3-d ones), and equal x^T·g summed by hand.
+    #[test]
+    fn linear_gradients_do_not_depend_on_the_input_rank() {
+        let (_guard, device) = test_autodiff_device();
+        let lin = LinearConfig::new(5, 3).init(&device);
+        let x = Tensor::<4>::random([2, 3, 4, 5], burn::tensor::Distribution::Default, &device);
+        let g = Tensor::<4>::random([2, 3, 4, 3], burn::tensor::Distribution::Default, &device);
+        let grads_of = |y: Tensor<2>| {
+            let grads = (y * g.clone().reshape([24, 3])).sum().backward();
+            (
+                lin.weight
+                    .val()
+                    .grad(&grads)
+                    .unwrap()
+                    .into_data()
+                    .to_vec::<f32>()
+                    .unwrap(),
+                lin.bias
+                    .as_ref()
+                    .unwrap()
+                    .val()
+                    .grad(&grads)
+                    .unwrap()
+                    .into_data()
+                    .to_vec::<f32>()
+                    .unwrap(),
+            )
+        };
+        let r4 = grads_of(lin.forward(x.clone()).reshape([24, 3]));
+        let r3 = grads_of(lin.forward(x.clone().reshape([6, 4, 5])).reshape([24, 3]));
+        let r2 = grads_of(lin.forward(x.clone().reshape([24, 5])));
+        let xs = x.into_data().to_vec::<f32>().unwrap();
+        let gs = g.into_data().to_vec::<f32>().unwrap();
+        let mut w = vec![0.0f32; 15];
+        let mut b = vec![0.0f32; 3];
+        for n in 0..24 {
+            for o in 0..3 {
+                b[o] += gs[n * 3 + o];
+                for i in 0..5 {
+                    w[i * 3 + o] += xs[n * 5 + i] * gs[n * 3 + o];
+                }
+            }
+        }
+        for (name, (gw, gb)) in [("4-d", &r4), ("3-d", &r3), ("2-d", &r2)] {
+            for (a, e) in gw.iter().zip(&w).chain(gb.iter().zip(&b)) {
+                assert!(
+                    (a - e).abs() < 1e-4,
+                    "{name}: {gw:?} / {gb:?} vs {w:?} / {b:?}"
+                );
+            }
+        }
+    }
 
     #[test]
     fn gru_cell_matches_hand_computation() {

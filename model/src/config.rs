@@ -247,6 +247,18 @@ pub enum ActionHead {
     Bins,
 }
 
+/// What one action query of the decoder stands for.
+#[derive(Serialize, Deserialize, Clone, Copy, Debug, Default, PartialEq, Eq)]
+#[serde(rename_all = "snake_case")]
+pub enum QueryLayout {
+    /// One query per action value: H_a·A queries (OpenVLA-OFT's layout).
+    #[default]
+    Value,
+    /// One query per chunk step: H_a queries, each read out to all A values (1/A of the query
+    /// tokens). Measured worse on state-mode T1 (train/README.md).
+    Step,
+}
+
 /// Action decoder (model.md §8).
 #[derive(Serialize, Deserialize, Clone, Debug, PartialEq)]
 #[serde(deny_unknown_fields)]
@@ -263,6 +275,9 @@ pub struct DecoderConfig {
     pub action_dim: usize,
     /// Head kind.
     pub head: ActionHead,
+    /// Query layout (absent in configs written before it existed: `value`).
+    #[serde(default)]
+    pub queries: QueryLayout,
 }
 
 /// Language: word-level tokenizer over a fixed vocabulary + learned embeddings (model.md §8).
@@ -371,6 +386,7 @@ impl ModelConfig {
                 horizon: 4,
                 action_dim: 7,
                 head: ActionHead::L1,
+                queries: QueryLayout::Value,
             },
             text: TextConfig {
                 vocab: Vec::new(),
@@ -434,6 +450,7 @@ impl ModelConfig {
                 horizon: 8,
                 action_dim: 7,
                 head: ActionHead::L1,
+                queries: QueryLayout::Value,
             },
             text: TextConfig {
                 vocab: Vec::new(),

@@ -1,6 +1,7 @@
 //! Action decoder (model.md §8): a bidirectional pre-LN transformer over
-//! [visual tokens ; language tokens ; H_a·A action queries], then a continuous L1 chunk head
-//! (MLP-ResNet, OpenVLA-OFT) or a 256-bin classification head (OpenVLA).
+//! [visual tokens ; language tokens ; action queries] — H_a·A queries, one per action value, or
+//! H_a, one per chunk step ([`QueryLayout`]) —, then a continuous L1 chunk head (MLP-ResNet,
+//! OpenVLA-OFT) or a 256-bin classification head (OpenVLA).
 
 use burn::module::Param;
 use burn::nn::{LayerNorm, Linear, LinearConfig};
@@ -9,7 +10,7 @@ use burn::tensor::Distribution;
 use burn::tensor::activation::gelu;
 
 use crate::blocks::{FfnBlock, SelfAttnBlock, layer_norm};
-use crate::config::{ActionHead, DecoderConfig};
+use crate::config::{ActionHead, DecoderConfig, QueryLayout};
 
 /// Number of classes of the discrete head (bins 1..=256 of numpy's digitize).
 pub const NUM_BINS: usize = 256;
@@ -73,10 +74,11 @@ pub struct ResBlock {
     pub fc2: Linear,
 }
 
-/// Continuous chunk head: [H_a, A·D_dec] → Linear → 2 residual blocks → LN → Linear → A.
+/// Continuous chunk head: per chunk step [A·D_dec] (value queries) or [D_dec] (step queries)
+/// → Linear → 2 residual blocks → LN → Linear → A.
 #[derive(Module, Debug)]
 pub struct L1Head {
-    /// `[A·D_dec, D_dec]`.
+    /// `[A·D_dec, D_dec]` (value queries) or `[D_dec, D_dec]` (step queries).
     pub input: Linear,
     /// Residual blocks.
     pub blocks: Vec<ResBlock>,
@@ -100,7 +102,7 @@ pub struct DecoderOutput {
 pub struct ActionDecoder {
     /// Segment embeddings of the language and query segments `[2, D_dec]`.
     pub segment: Param<Tensor<2>>,
-    /// Learned action queries (with their positions) `[H_a·A, D_dec]`.
+    /// Learned action queries (with their positions) `[H_a·A, D_dec]` or `[H_a, D_dec]`.
     pub queries: Param<Tensor<2>>,
     /// Transformer layers.
     pub layers: Vec<DecoderLayer>,
@@ -108,12 +110,14 @@ pub struct ActionDecoder {
     pub norm: LayerNorm,
     /// Continuous head.
     pub l1: Option<L1Head>,
-    /// Discrete head `[D_dec, 256]`.
+    /// Discrete head `[D_dec, 256]` (value queries) or `[D_dec, A·256]` (step queries).
     pub bins: Option<Linear>,
     /// H_a.
     pub horizon: usize,
     /// A.
     pub action_dim: usize,
+    /// One query per chunk step (else one per action value).
+    pub step_queries: bool,
 }
 
 impl ActionDecoder {
@@ -122,9 +126,11 @@ impl ActionDecoder {
         let w = config.width;
         let (h, a) = (config.horizon, config.action_dim);
         let normal = Distribution::Normal(0.0, 0.02);
+        let step = config.queries == QueryLayout::Step;
+        let (q, per_query) = if step { (h, a) } else { (h * a, 1) };
         ActionDecoder {
             segment: Param::from_tensor(Tensor::random([2, w], normal, device)),
-            queries: Param::from_tensor(Tensor::random([h * a, w], normal, device)),
+            queries: Param::from_tensor(Tensor::random([q, w], normal, device)),
             layers: (0..config.layers)
                 .map(|_| DecoderLayer {
                     attn: SelfAttnBlock::new(w, config.heads, device),
@@ -133,7 +139,7 @@ impl ActionDecoder {
                 .collect(),
             norm: layer_norm(w, device),
             l1: (config.head == ActionHead::L1).then(|| L1Head {
-                input: LinearConfig::new(a * w, w).init(device),
+                input: LinearConfig::new(if step { w } else { a * w }, w).init(device),
                 blocks: (0..2)
                     .map(|_| ResBlock {
                         norm: layer_norm(w, device),
@@ -145,9 +151,10 @@ impl ActionDecoder {
                 output: LinearConfig::new(w, a).init(device),
             }),
             bins: (config.head == ActionHead::Bins)
-                .then(|| LinearConfig::new(w, NUM_BINS).init(device)),
+                .then(|| LinearConfig::new(w, per_query * NUM_BINS).init(device)),
             horizon: h,
             action_dim: a,
+            step_queries: step,
         }
     }
 
@@ -175,7 +182,7 @@ impl ActionDecoder {
         assert_shape!(lang, [n, l_txt, w]);
         assert_shape!(lang_pad, [n, l_txt]);
         let (h, a) = (self.horizon, self.action_dim);
-        let q = h * a;
+        let q = if self.step_queries { h } else { h * a };
         let device = visual.device();
         let seg = self.segment.val();
         let lang = lang + seg.clone().narrow(0, 0, 1).unsqueeze_dim::<3>(0);
@@ -192,9 +199,10 @@ impl ActionDecoder {
             x = layer.attn.forward(x, Some(pad.clone()));
             x = layer.ffn.forward(x);
         }
-        let out = self.norm.forward(x.narrow(1, v + l_txt, q)); // [N, H·A, D_dec]
+        let out = self.norm.forward(x.narrow(1, v + l_txt, q)); // [N, Q, D_dec]
         if let Some(head) = &self.l1 {
-            let mut y = head.input.forward(out.reshape([n, h, a * w]));
+            let per_step = if self.step_queries { w } else { a * w };
+            let mut y = head.input.forward(out.reshape([n, h, per_step]));
             for blk in &head.blocks {
                 let r = blk
                     .fc2
@@ -234,6 +242,7 @@ mod tests {
             horizon: 3,
             action_dim: 7,
             head,
+            queries: QueryLayout::Value,
         }
     }
 
@@ -271,22 +280,49 @@ mod tests {
     }
 
     #[test]
-    fn decoder_shapes_for_both_heads() {
+    fn decoder_shapes_for_both_heads_and_query_layouts() {
         let (_guard, device) = test_device();
         let vis = Tensor::<3>::random([4, 5, 16], Distribution::Default, &device);
         let lang = Tensor::<3>::random([4, 6, 16], Distribution::Default, &device);
         let pad = Tensor::<2>::zeros([4, 6], &device).equal_elem(1.0);
-        let out = ActionDecoder::new(&cfg(ActionHead::L1), &device).forward(
-            vis.clone(),
-            None,
-            lang.clone(),
-            pad.clone(),
-        );
-        assert_eq!(out.actions.dims(), [4, 3, 7]);
-        assert!(out.logits.is_none());
-        let out = ActionDecoder::new(&cfg(ActionHead::Bins), &device).forward(vis, None, lang, pad);
-        assert_eq!(out.actions.dims(), [4, 3, 7]);
-        assert_eq!(out.logits.unwrap().dims(), [4, 3, 7, 256]);
+        for (queries, n_queries) in [(QueryLayout::Value, 21), (QueryLayout::Step, 3)] {
+            let c = DecoderConfig {
+                queries,
+                ..cfg(ActionHead::L1)
+            };
+            let dec = ActionDecoder::new(&c, &device);
+            assert_eq!(dec.queries.dims(), [n_queries, 16]);
+            let out = dec.forward(vis.clone(), None, lang.clone(), pad.clone());
+            assert_eq!(out.actions.dims(), [4, 3, 7]);
+            assert!(out.logits.is_none());
+            let c = DecoderConfig {
+                queries,
+                ..cfg(ActionHead::Bins)
+            };
+            let out = ActionDecoder::new(&c, &device).forward(
+                vis.clone(),
+                None,
+                lang.clone(),
+                pad.clone(),
+            );
+            assert_eq!(out.actions.dims(), [4, 3, 7]);
+            assert_eq!(out.logits.unwrap().dims(), [4, 3, 7, 256]);
+        }
+    }
+
+    #[test]
+    fn configs_without_a_query_layout_read_as_value_queries() {
+        let c: DecoderConfig = serde_json::from_str(
+            r#"{"width":16,"layers":1,"heads":2,"horizon":3,"action_dim":7,"head":"l1"}"#,
+        )
+        .unwrap();
+        assert_eq!(c.queries, QueryLayout::Value);
+        let back = serde_json::to_string(&DecoderConfig {
+            queries: QueryLayout::Step,
+            ..c
+        })
+        .unwrap();
+        assert!(back.contains(r#""queries":"step""#), "{back}");
     }
 
     #[test]

@@ -218,6 +218,10 @@ pub struct TrainSection {
     /// (truncated BPTT, model.md §10); `windows` draws independent windows, each from a cold
     /// memory (for comparison).
     pub sampling: Sampling,
+    /// `episodes` sampling: each lane leaves its first episode at a seeded step, so that the
+    /// lanes walk different phases of their episodes from then on (false: every lane starts at
+    /// step 0 together and, on demos of similar length, every batch holds the same phase).
+    pub stagger: bool,
     /// Peak learning rate (AdamW).
     pub lr: f64,
     /// Linear warm-up steps (from 0 to `lr`).
@@ -268,6 +272,7 @@ impl Default for TrainSection {
             steps: 20_000,
             batch_size: 8,
             sampling: Sampling::default(),
+            stagger: true,
             lr: 3e-4,
             warmup_steps: 500,
             final_lr_fraction: 0.0,

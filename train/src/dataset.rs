@@ -12,8 +12,8 @@ use data::{DatasetIndex, OpenedDataset, Split, WindowConfig, WindowDataset};
 use indicatif::{ProgressBar, ProgressStyle};
 use model::Processor;
 use model::io::state::{StateSpec, StateStats};
-use rand::SeedableRng;
 use rand::seq::SliceRandom;
+use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
 use crate::config::Config;
@@ -302,6 +302,11 @@ pub struct Lane {
     pub epoch: u64,
     /// First step of the lane's next chunk.
     pub start: usize,
+    /// Step at which the lane leaves this episode before its end (the first episode of each
+    /// lane only: see [`EpisodeSampler`]); None walks it to its end. Absent in checkpoints
+    /// written before lanes were staggered.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub stop: Option<usize>,
 }
 
 /// One chunk of a batch: which episode, from which step, and whether the lane starts the
@@ -322,20 +327,39 @@ pub struct ChunkSpan {
 /// consecutive chunks from its first frame, and take the next episode of a seeded per-epoch
 /// order when theirs ends. The state (episode order position, lanes) is part of the checkpoint,
 /// so a resumed run draws exactly the chunks the uninterrupted run would have drawn.
+///
+/// With `stagger` (`train.stagger`, the default), each lane leaves its *first* episode after a seeded number of steps
+/// (uniform over the episode's length), so that from then on the lanes are at different phases
+/// of their episodes. Without it every lane starts at step 0 together and, on demonstrations of
+/// similar length, they stay in step for many episodes: every batch then holds the same phase
+/// of the task (all reaches, then all grasps, …), and training chases the phase of the moment
+/// (measured on T1: the action loss sat on a constant-action plateau for most of a run). A
+/// shortened first episode is still walked from its first frame, so no lane ever starts cold
+/// in the middle of an episode.
 #[derive(Clone, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 pub struct EpisodeSampler {
     /// Draws episodes in the order of a [`Sampler`] over the split's episodes.
     pub order: Sampler,
     /// The lanes (empty before the first batch).
     pub lanes: Vec<Lane>,
+    /// Lanes leave their first episode at a seeded step (false in checkpoints written before
+    /// the option existed, whose lanes were all started already).
+    #[serde(default)]
+    pub stagger: bool,
+}
+
+/// Seed of lane `lane`'s first stop, from the sampler's seed.
+fn stop_seed(seed: u64, lane: usize) -> u64 {
+    seed ^ 0x6c61_6e65_5f73_7461 ^ (lane as u64).wrapping_mul(0x9e37_79b9_7f4a_7c15)
 }
 
 impl EpisodeSampler {
-    /// A sampler over `episodes` episodes.
-    pub fn new(seed: u64, episodes: usize) -> Self {
+    /// A sampler over `episodes` episodes; `stagger` as described above.
+    pub fn new(seed: u64, episodes: usize, stagger: bool) -> Self {
         EpisodeSampler {
             order: Sampler::new(seed, episodes),
             lanes: Vec::new(),
+            stagger,
         }
     }
 
@@ -348,21 +372,28 @@ impl EpisodeSampler {
     ) -> Vec<ChunkSpan> {
         while self.lanes.len() < lanes {
             let (episode, epoch) = self.order.next_batch(1)[0];
+            let stop = self.stagger.then(|| {
+                ChaCha8Rng::seed_from_u64(stop_seed(self.order.seed, self.lanes.len()))
+                    .random_range(1..=episode_len(episode).max(1))
+            });
             self.lanes.push(Lane {
                 episode,
                 epoch,
                 start: 0,
+                stop,
             });
         }
         self.lanes
             .iter_mut()
             .map(|lane| {
-                if lane.start >= episode_len(lane.episode) {
+                let end = episode_len(lane.episode).min(lane.stop.unwrap_or(usize::MAX));
+                if lane.start >= end {
                     let (episode, epoch) = self.order.next_batch(1)[0];
                     *lane = Lane {
                         episode,
                         epoch,
                         start: 0,
+                        stop: None,
                     };
                 }
                 let span = ChunkSpan {
@@ -465,8 +496,14 @@ mod tests {
 
     #[test]
     fn episode_lanes_walk_whole_episodes_in_chunks_and_resume_exactly() {
+        for stagger in [false, true] {
+            lanes_walk_and_resume(stagger);
+        }
+    }
+
+    fn lanes_walk_and_resume(stagger: bool) {
         let lens = [5usize, 3, 7];
-        let mut s = EpisodeSampler::new(1, 3);
+        let mut s = EpisodeSampler::new(1, 3, stagger);
         let mut walked: std::collections::BTreeMap<(usize, u64), Vec<usize>> = Default::default();
         for _ in 0..12 {
             let b = s.next_batch(2, 2, |k| lens[k]);
@@ -491,7 +528,7 @@ mod tests {
             assert!(starts.len() <= lens[*k].div_ceil(2));
         }
         // Resumed from its serialised state, the sampler continues identically.
-        let mut a = EpisodeSampler::new(1, 3);
+        let mut a = EpisodeSampler::new(1, 3, stagger);
         for _ in 0..5 {
             a.next_batch(2, 2, |k| lens[k]);
         }
@@ -502,6 +539,40 @@ mod tests {
                 a.next_batch(2, 2, |k| lens[k]),
                 b.next_batch(2, 2, |k| lens[k])
             );
+        }
+    }
+
+    #[test]
+    fn staggered_lanes_walk_different_phases() {
+        // 8 lanes over 100 episodes of equal length 40 in chunks of 4.
+        let phases = |stagger: bool| {
+            let mut s = EpisodeSampler::new(3, 100, stagger);
+            let mut distinct = Vec::new();
+            let mut first_passes = std::collections::BTreeSet::new();
+            for step in 0..60 {
+                let b = s.next_batch(8, 4, |_| 40);
+                let starts: std::collections::BTreeSet<usize> = b.iter().map(|c| c.start).collect();
+                distinct.push(starts.len());
+                for c in &b {
+                    if c.fresh && step > 0 {
+                        first_passes.insert(c.episode);
+                    }
+                }
+            }
+            (distinct, first_passes.len())
+        };
+        let (aligned, _) = phases(false);
+        assert!(aligned.iter().all(|&d| d == 1), "{aligned:?}");
+        let (staggered, refills) = phases(true);
+        // After the first (shortened) episodes the 8 lanes sit at several phases at once.
+        let late = &staggered[20..];
+        assert!(late.iter().all(|&d| d >= 4), "{staggered:?}");
+        assert!(refills >= 8, "{refills}");
+        // The stops are seeded: the same seed draws the same chunks.
+        let mut a = EpisodeSampler::new(3, 100, true);
+        let mut b = EpisodeSampler::new(3, 100, true);
+        for _ in 0..30 {
+            assert_eq!(a.next_batch(8, 4, |_| 40), b.next_batch(8, 4, |_| 40));
         }
     }
 }

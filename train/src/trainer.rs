@@ -359,7 +359,7 @@ pub fn train(cfg: &Config, opts: &TrainOptions) -> Result<TrainSummary> {
                 step: 0,
                 sampler: Sampler::new(t.seed, data.train.len()),
                 episodes: (t.sampling == Sampling::Episodes)
-                    .then(|| EpisodeSampler::new(t.seed, episodes)),
+                    .then(|| EpisodeSampler::new(t.seed, episodes, t.stagger)),
                 rng_seed: t.seed,
                 elapsed_s: 0.0,
                 model: mcfg.clone(),
