@@ -211,7 +211,7 @@ mod tests {
                     .grad(&grads)
                     .unwrap()
                     .into_data()
-                    .to_vec::<f32>()
+                    .try_to_vec::<f32>()
                     .unwrap(),
                 lin.bias
                     .as_ref()
@@ -220,15 +220,15 @@ mod tests {
                     .grad(&grads)
                     .unwrap()
                     .into_data()
-                    .to_vec::<f32>()
+                    .try_to_vec::<f32>()
                     .unwrap(),
             )
         };
         let r4 = grads_of(lin.forward(x.clone()).reshape([24, 3]));
         let r3 = grads_of(lin.forward(x.clone().reshape([6, 4, 5])).reshape([24, 3]));
         let r2 = grads_of(lin.forward(x.clone().reshape([24, 5])));
-        let xs = x.into_data().to_vec::<f32>().unwrap();
-        let gs = g.into_data().to_vec::<f32>().unwrap();
+        let xs = x.into_data().try_to_vec::<f32>().unwrap();
+        let gs = g.into_data().try_to_vec::<f32>().unwrap();
         let mut w = vec![0.0f32; 15];
         let mut b = vec![0.0f32; 3];
         for n in 0..24 {
