@@ -219,8 +219,9 @@ pub struct TrainSection {
     /// memory (for comparison).
     pub sampling: Sampling,
     /// `episodes` sampling: each lane leaves its first episode at a seeded step, so that the
-    /// lanes walk different phases of their episodes from then on (false: every lane starts at
-    /// step 0 together and, on demos of similar length, every batch holds the same phase).
+    /// lanes walk different phases of their episodes from then on (false, the default: every lane
+    /// starts at step 0 together and, on demos of similar length, every batch holds the same
+    /// phase). Measured better on state-mode T1 and worse on LIBERO-Goal (train/README.md).
     pub stagger: bool,
     /// Peak learning rate (AdamW).
     pub lr: f64,
@@ -272,7 +273,7 @@ impl Default for TrainSection {
             steps: 20_000,
             batch_size: 8,
             sampling: Sampling::default(),
-            stagger: true,
+            stagger: false,
             lr: 3e-4,
             warmup_steps: 500,
             final_lr_fraction: 0.0,
