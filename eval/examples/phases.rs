@@ -7,25 +7,14 @@
 
 use anyhow::Context;
 
+/// The episode file `arg`, or the episodes of a dataset or `--record` directory (its files and
+/// those of its task subfolders).
 fn episodes(arg: &str) -> anyhow::Result<Vec<std::path::PathBuf>> {
     let p = std::path::Path::new(arg);
     if p.is_file() {
         return Ok(vec![p.to_path_buf()]);
     }
-    let mut out = vec![];
-    let mut stack = vec![p.to_path_buf()];
-    while let Some(d) = stack.pop() {
-        for e in std::fs::read_dir(&d).with_context(|| d.display().to_string())? {
-            let e = e?.path();
-            if e.is_dir() {
-                stack.push(e);
-            } else if e.extension().is_some_and(|x| x == "mcap") {
-                out.push(e);
-            }
-        }
-    }
-    out.sort();
-    Ok(out)
+    Ok(data::index::episode_files(p)?)
 }
 
 fn main() -> anyhow::Result<()> {

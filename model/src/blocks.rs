@@ -203,25 +203,22 @@ mod tests {
         let lin = LinearConfig::new(5, 3).init(&device);
         let x = Tensor::<4>::random([2, 3, 4, 5], burn::tensor::Distribution::Default, &device);
         let g = Tensor::<4>::random([2, 3, 4, 3], burn::tensor::Distribution::Default, &device);
+        fn grad_of<const D: usize>(
+            p: &burn::module::Param<Tensor<D>>,
+            grads: &burn::tensor::Gradients,
+        ) -> Vec<f32> {
+            p.val()
+                .grad(grads)
+                .unwrap()
+                .into_data()
+                .try_to_vec::<f32>()
+                .unwrap()
+        }
         let grads_of = |y: Tensor<2>| {
             let grads = (y * g.clone().reshape([24, 3])).sum().backward();
             (
-                lin.weight
-                    .val()
-                    .grad(&grads)
-                    .unwrap()
-                    .into_data()
-                    .try_to_vec::<f32>()
-                    .unwrap(),
-                lin.bias
-                    .as_ref()
-                    .unwrap()
-                    .val()
-                    .grad(&grads)
-                    .unwrap()
-                    .into_data()
-                    .try_to_vec::<f32>()
-                    .unwrap(),
+                grad_of(&lin.weight, &grads),
+                grad_of(lin.bias.as_ref().unwrap(), &grads),
             )
         };
         let r4 = grads_of(lin.forward(x.clone()).reshape([24, 3]));
