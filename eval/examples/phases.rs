@@ -3,7 +3,10 @@
 //! is from the nearest movable object (horizontal and vertical, cm), whether any object was held,
 //! and the highest lift of a held object (cm above its start); then a summary line.
 //!
-//! `cargo run --release -p eval --example phases -- DIR_OR_EPISODE...`
+//! With `--every N` (first argument), every N-th step of each episode is printed too: the hand's
+//! position (cm) and the action.
+//!
+//! `cargo run --release -p eval --example phases -- [--every N] DIR_OR_EPISODE...`
 
 use anyhow::Context;
 
@@ -18,7 +21,18 @@ fn episodes(arg: &str) -> anyhow::Result<Vec<std::path::PathBuf>> {
 }
 
 fn main() -> anyhow::Result<()> {
-    let args: Vec<String> = std::env::args().skip(1).collect();
+    let mut args: Vec<String> = std::env::args().skip(1).collect();
+    let every = if args.first().is_some_and(|a| a == "--every") {
+        let n = args
+            .get(1)
+            .and_then(|v| v.parse::<u64>().ok())
+            .filter(|&n| n > 0)
+            .context("--every takes a step count ≥ 1")?;
+        args.drain(..2);
+        Some(n)
+    } else {
+        None
+    };
     println!("episode  satisfied  close@step  dxy_cm  dz_cm  held  lift_cm  steps  dx_cm  dy_cm");
     let (mut n, mut n_held, mut n_closed, mut n_done) = (0, 0, 0, 0);
     for arg in &args {
@@ -36,6 +50,16 @@ fn main() -> anyhow::Result<()> {
             let mut held = false;
             let mut lift = 0.0f32;
             for s in &steps {
+                if every.is_some_and(|n| s.step % n == 0) {
+                    println!(
+                        "  step {:>4}  hand {:>6.1} {:>6.1} {:>6.1}  action {:>5.2?}",
+                        s.step,
+                        s.state[0] * 100.0,
+                        s.state[1] * 100.0,
+                        s.state[2] * 100.0,
+                        s.action
+                    );
+                }
                 if close.is_none() && s.action[6] > 0.0 {
                     let hand = [s.state[0], s.state[1], s.state[2]];
                     let nearest = s

@@ -348,3 +348,24 @@ fn task_file_faults_are_exit_2_naming_the_file_in_render_and_generate() {
         }
     }
 }
+
+#[test]
+fn bad_exec_noise_is_exit_2_and_writes_nothing() {
+    for noise in ["-0.1", "nan", "x"] {
+        let out = tmp(&format!("noise-{noise}"));
+        let arg = format!("--exec-noise={noise}");
+        let (code, _, err) = sim(&[
+            "generate",
+            "--task",
+            "t1",
+            "--episodes",
+            "1",
+            "--out",
+            out.to_str().unwrap(),
+            &arg,
+        ]);
+        assert_eq!(code, 2, "{err}");
+        assert!(err.contains("--exec-noise") && err.contains("≥ 0"), "{err}");
+        assert!(!out.exists(), "{noise}: nothing written");
+    }
+}

@@ -157,3 +157,89 @@ fn recording_needs_segmentation() {
     .unwrap();
     assert!(e.to_string().contains("segmentation"), "{e}");
 }
+
+/// DART (`exec_noise`): the arm is pushed off the nominal path while the expert moves with the
+/// gripper open, and the recorded actions are its clean corrections. Stepping the recorded actions therefore leaves
+/// the recorded states, while stepping the expert's perturbed actions (same seed, same noise
+/// stream) reproduces every recorded state and label; the expert still solves the task, and
+/// the same seed gives the same bytes.
+#[test]
+fn execution_noise_records_clean_corrections_of_perturbed_moves() {
+    let task = registry::resolve("t1").unwrap();
+    let cfg = EnvConfig {
+        image_size: 32,
+        segmentation: true,
+        ..EnvConfig::default()
+    };
+    let mut env = Env::from_task(&task, cfg).unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    let expert = sim::expert::ExpertConfig {
+        exec_noise: 0.1,
+        ..sim::generate::plain_expert()
+    };
+    let record = |env: &mut Env, name: &str| {
+        let path = dir.path().join(name);
+        let ok = sim::generate::record_episode(env, &task, 0, &path, Default::default(), &expert)
+            .unwrap();
+        assert!(ok, "the perturbed expert solves T1 seed 0");
+        path
+    };
+    let (a, b) = (record(&mut env, "a.mcap"), record(&mut env, "b.mcap"));
+    assert_eq!(std::fs::read(&a).unwrap(), std::fs::read(&b).unwrap());
+    let steps = data::EpisodeReader::open(&a).unwrap().read_all().unwrap();
+
+    // The expert's own loop: clean labels, perturbed execution.
+    let mut obs = env.reset(0).unwrap();
+    let mut ex = sim::expert::Expert::with_config(&task, 0, expert.clone());
+    let mut pushed = 0;
+    for (k, st) in steps.iter().enumerate() {
+        for (o, s) in st.objects.iter().zip(&obs.objects) {
+            assert_eq!(o.pose, Some(s.pose()), "step {k} {}", o.name);
+        }
+        let clean = ex
+            .act(&env, &obs)
+            .expect("the expert acts at every recorded step");
+        assert_eq!(st.action, clean, "step {k}: the label is the clean action");
+        let run = ex.executed(clean);
+        pushed += usize::from(run != clean);
+        if clean[6] > 0.0 {
+            assert_eq!(run, clean, "step {k}: no push while the gripper is closed");
+        }
+        assert!(
+            run.iter().all(|v| (-1.0..=1.0).contains(v)),
+            "step {k}: {run:?}"
+        );
+        assert_eq!(
+            run[3..],
+            clean[3..],
+            "step {k}: only the translation is pushed"
+        );
+        obs = env.step(&run).unwrap();
+    }
+    assert!(
+        pushed > steps.len() / 3,
+        "{pushed} of {} steps pushed",
+        steps.len()
+    );
+
+    // Replaying the labels alone drifts from the recorded states.
+    let mut obs = env.reset(0).unwrap();
+    let mut drift = 0f32;
+    for st in &steps {
+        let hand = [
+            obs.eef_pos[0] as f32,
+            obs.eef_pos[1] as f32,
+            obs.eef_pos[2] as f32,
+        ];
+        drift = drift.max(
+            (0..3)
+                .map(|i| (hand[i] - st.state[i]).abs())
+                .fold(0.0, f32::max),
+        );
+        obs = env.step(&st.action).unwrap();
+    }
+    assert!(
+        drift > 1e-3,
+        "labels replayed follow the perturbed path (drift {drift})"
+    );
+}

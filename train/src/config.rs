@@ -85,7 +85,7 @@ fn yes() -> bool {
 
 /// `[data].generate`: what `sim generate --task --episodes --val --seed --size --workers --out`
 /// would produce (the same files, byte for byte: generation is a function of the seed).
-#[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct GenerateSpec {
     /// Task id or alias (`t1` … `t10`, `t3@12`, `libero_goal/<stem>`), or a suite (`libero_mem`,
@@ -119,6 +119,14 @@ pub struct GenerateSpec {
     /// (default) or `gripper` (T7/T8: the bowl nearest the hand moves first).
     #[serde(default, skip_serializing_if = "is_default_branch_rule")]
     pub branch_rule: sim::expert::BranchRule,
+    /// DART execution noise (`sim generate --exec-noise`): σ of the Gaussian push on the executed
+    /// translation while the expert moves, its clean corrections recorded; 0 (default) = none.
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub exec_noise: f64,
+}
+
+fn is_zero(v: &f64) -> bool {
+    *v == 0.0
 }
 
 fn is_default_branch_rule(r: &sim::expert::BranchRule) -> bool {
@@ -421,6 +429,12 @@ impl Config {
             if g.image_size < 8 || g.workers == Some(0) {
                 return Err("data.generate: image_size must be ≥ 8 and workers ≥ 1".into());
             }
+            if !(g.exec_noise.is_finite() && g.exec_noise >= 0.0) {
+                return Err(format!(
+                    "data.generate: exec_noise must be a number ≥ 0 (got {})",
+                    g.exec_noise
+                ));
+            }
         }
         crate::stages::check(&t.stages)?;
         if self.data.window == Some(0) {
@@ -657,6 +671,22 @@ variant = "e_slotssm"
             e("[model.overrides]\nwindow = { past = 100000 }\n"),
             "[model]: invalid model config: window.past = 100000 is above the limit 1024"
         );
+        let with_noise = |noise: &str| {
+            format!(
+                "[data]\ndir = \"d\"\ngenerate = {{ task = \"t1\", episodes = 2, val = 1, exec_noise = {noise} }}\n[model]\nvariant = \"e_slotssm\"\n"
+            )
+        };
+        assert_eq!(
+            Config::parse(&with_noise("-0.1")).unwrap_err(),
+            "data.generate: exec_noise must be a number ≥ 0 (got -0.1)"
+        );
+        let c = Config::parse(&with_noise("0.2")).unwrap();
+        assert_eq!(c.data.generate.as_ref().unwrap().exec_noise, 0.2);
+        // Without noise the key is left out, so configs written before it read back the same.
+        let plain = Config::parse(&with_noise("0.0")).unwrap();
+        let text = toml::to_string(&plain).unwrap();
+        assert!(!text.contains("exec_noise"), "{text}");
+        assert_eq!(Config::parse(&text).unwrap(), plain);
     }
 
     #[test]

@@ -74,6 +74,7 @@ pub fn generate_dataset(spec: &GenerateSpec, dir: &Path, progress: bool) -> Resu
         image_size: spec.image_size,
         expert: sim::expert::ExpertConfig {
             branch_rule: spec.branch_rule,
+            exec_noise: spec.exec_noise,
             ..sim::generate::expert_config(spec.plain_expert, spec.hold_steps)
         },
         ..Default::default()

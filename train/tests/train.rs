@@ -308,6 +308,7 @@ fn generate_spec(task: &str) -> train::config::GenerateSpec {
         plain_expert: false,
         hold_steps: None,
         branch_rule: Default::default(),
+        exec_noise: 0.0,
     }
 }
 

@@ -107,6 +107,12 @@ pub enum Command {
         /// to the hand; ties by destination).
         #[arg(long, default_value = "destination")]
         branch_rule: sim::expert::BranchRule,
+        /// DART: standard deviation of Gaussian noise on the executed translation while the
+        /// expert moves with the gripper open (action units; e.g. 0.2), recording its noise-free
+        /// corrections as the actions, so demonstrations cover states off the nominal path.
+        /// Episodes recorded with it do not replay from their actions.
+        #[arg(long, default_value_t = 0.0, value_parser = non_negative)]
+        exec_noise: f64,
     },
     /// Render the agentview of every shipped task at one seed into a labelled contact sheet.
     Sheet {
@@ -283,6 +289,7 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
             force,
             shard,
             branch_rule,
+            exec_noise,
         } => generate::run(
             task,
             out,
@@ -294,6 +301,7 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
                 image_size: size,
                 expert: sim::expert::ExpertConfig {
                     branch_rule,
+                    exec_noise,
                     ..sim::generate::expert_config(plain_expert, hold_steps)
                 },
                 force,
@@ -353,5 +361,13 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
             task,
             assets,
         } => bench::run(json, steps, rounds, gl_threads, task, assets),
+    }
+}
+
+/// A finite number ≥ 0 (clap value parser).
+fn non_negative(v: &str) -> Result<f64, String> {
+    match v.parse::<f64>() {
+        Ok(x) if x.is_finite() && x >= 0.0 => Ok(x),
+        _ => Err(format!("`{v}` is not a number ≥ 0")),
     }
 }

@@ -80,6 +80,13 @@ pub struct GenerationRecord {
     /// the destination rule).
     #[serde(default)]
     pub branch_rule: crate::expert::BranchRule,
+    /// The expert's execution noise (DART; absent when 0, as in records from before it existed).
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub exec_noise: f64,
+}
+
+fn is_zero(v: &f64) -> bool {
+    *v == 0.0
 }
 
 impl GenerationRecord {
@@ -100,6 +107,7 @@ impl GenerationRecord {
             chunk_size: cfg.writer.chunk_size,
             zstd_level: cfg.writer.zstd_level,
             branch_rule: cfg.expert.branch_rule,
+            exec_noise: cfg.expert.exec_noise,
         }
     }
 
@@ -323,7 +331,8 @@ pub fn record_episode(
         let Some(action) = expert.act(env, &obs) else {
             break;
         };
-        let next = env.step(&action)?;
+        // With execution noise the arm moves by the perturbed action; the label is the clean one.
+        let next = env.step(&expert.executed(action))?;
         rec.record(env, &obs, action, &next)?;
         obs = next;
         let g = obs
