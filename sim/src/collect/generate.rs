@@ -14,8 +14,9 @@ use crate::expert::Expert;
 use crate::task::TaskSpec;
 use crate::world::env::{Env, EnvConfig};
 
-/// Attempts per episode before giving up.
-pub const MAX_ATTEMPTS: u64 = 8;
+/// Attempts per episode before giving up (an episode done within fewer attempts is the same file
+/// whatever the limit: attempt seeds do not depend on it).
+pub const MAX_ATTEMPTS: u64 = 32;
 /// Steps recorded after the goal is done (a short hold), when the expert has not stopped by then;
 /// an expert asked to hold longer than this (`ExpertConfig::hold_steps`) is recorded until it
 /// stops: its release and retreat, then the idle hold.
