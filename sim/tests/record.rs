@@ -4,6 +4,18 @@ use sim::record::Recorder;
 use sim::task::registry;
 use sim::{Env, EnvConfig};
 
+/// T1 with 32² cameras and segmentation, as `sim generate` records it.
+fn t1_env() -> (sim::task::TaskSpec, Env) {
+    let task = registry::resolve("t1").unwrap();
+    let cfg = EnvConfig {
+        image_size: 32,
+        segmentation: true,
+        ..EnvConfig::default()
+    };
+    let env = Env::from_task(&task, cfg).unwrap();
+    (task, env)
+}
+
 #[test]
 fn a_rollout_round_trips_through_mcap() {
     let task = registry::resolve("t1").unwrap();
@@ -81,13 +93,7 @@ fn a_rollout_round_trips_through_mcap() {
 /// observation, and the bowl is flagged as grasped while it is carried, and only then.
 #[test]
 fn recorded_poses_track_the_objects_and_the_grasp() {
-    let task = registry::resolve("t1").unwrap();
-    let cfg = EnvConfig {
-        image_size: 32,
-        segmentation: true,
-        ..EnvConfig::default()
-    };
-    let mut env = Env::from_task(&task, cfg).unwrap();
+    let (task, mut env) = t1_env();
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("ep.mcap");
     assert!(
@@ -165,13 +171,7 @@ fn recording_needs_segmentation() {
 /// the same seed gives the same bytes.
 #[test]
 fn execution_noise_records_clean_corrections_of_perturbed_moves() {
-    let task = registry::resolve("t1").unwrap();
-    let cfg = EnvConfig {
-        image_size: 32,
-        segmentation: true,
-        ..EnvConfig::default()
-    };
-    let mut env = Env::from_task(&task, cfg).unwrap();
+    let (task, mut env) = t1_env();
     let dir = tempfile::tempdir().unwrap();
     let expert = sim::expert::ExpertConfig {
         exec_noise: 0.1,

@@ -120,7 +120,8 @@ pub struct GenerateSpec {
     #[serde(default, skip_serializing_if = "is_default_branch_rule")]
     pub branch_rule: sim::expert::BranchRule,
     /// DART execution noise (`sim generate --exec-noise`): σ of the Gaussian push on the executed
-    /// translation while the expert moves, its clean corrections recorded; 0 (default) = none.
+    /// translation while the expert moves with the gripper open, its clean corrections recorded;
+    /// 0 (default) = none.
     #[serde(default, skip_serializing_if = "is_zero")]
     pub exec_noise: f64,
 }
