@@ -360,6 +360,7 @@ pub fn evaluate(
         policy: String::new(),
         run: None,
         checkpoint_step: None,
+        execution: None,
         seed: cfg.seed,
         episodes_per_task: cfg.episodes,
         full_budget: cfg.full_budget,

@@ -154,6 +154,11 @@ struct EvalArgs {
     /// a Slurm array job; `eval merge` joins the shards' output folders.
     #[arg(long)]
     shard: Option<data::shard::Shard>,
+    /// How the model's action chunks are executed: `first` (each step's first action),
+    /// `ensemble` (ACT's temporal ensembling over the last H_a chunks) or N (the first N actions
+    /// of a chunk open-loop, openpi's replan steps).
+    #[arg(long, default_value = "first")]
+    execute: eval::policy::Execution,
     /// No progress bar.
     #[arg(long)]
     quiet: bool,
@@ -186,6 +191,7 @@ struct Setup {
     device: burn::prelude::Device,
     tasks: String,
     out: PathBuf,
+    execute: eval::policy::Execution,
 }
 
 fn setup(args: &EvalArgs) -> anyhow::Result<Setup> {
@@ -232,17 +238,21 @@ fn setup(args: &EvalArgs) -> anyhow::Result<Setup> {
         device,
         tasks,
         out,
+        execute: args.execute,
     })
 }
 
 fn make_policy(s: &Setup) -> Result<Box<dyn Policy>, EvalError> {
     Ok(match s.kind {
-        PolicyKind::Model => Box::new(eval::run::policy(
-            s.run
-                .as_ref()
-                .ok_or_else(|| EvalError::Argument("no run".into()))?,
-            &s.device,
-        )?),
+        PolicyKind::Model => Box::new(
+            eval::run::policy(
+                s.run
+                    .as_ref()
+                    .ok_or_else(|| EvalError::Argument("no run".into()))?,
+                &s.device,
+            )?
+            .with_execution(s.execute),
+        ),
         PolicyKind::Expert => Box::new(eval::ExpertPolicy::default()),
         PolicyKind::Random => Box::new(eval::RandomPolicy::default()),
         PolicyKind::Zero => Box::new(eval::ZeroPolicy),
@@ -300,6 +310,9 @@ fn run_tasks(
     results.policy = s.kind.name().to_string();
     results.run = s.run.as_ref().map(|r| r.dir.display().to_string());
     results.checkpoint_step = s.run.as_ref().map(|r| r.step);
+    if s.kind == PolicyKind::Model && s.execute != eval::policy::Execution::First {
+        results.execution = Some(s.execute.to_string());
+    }
     Ok(results)
 }
 

@@ -103,12 +103,91 @@ impl Policy for ExpertPolicy {
     }
 }
 
+/// How the model's predicted action chunks (`[H_a]` actions per step) become executed actions.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum Execution {
+    /// The first action of every step's chunk (the default, as upstream `mem_6`).
+    #[default]
+    First,
+    /// ACT's temporal ensembling: each step's action is the mean of what the last H_a chunks
+    /// predicted for that step (uniform weights), gripper binarised after averaging.
+    Ensemble,
+    /// openpi's `replan_steps`: the first N actions of a chunk run open-loop before the next
+    /// chunk is used (N capped at H_a); the memory still reads every frame.
+    Replan(usize),
+}
+
+impl std::str::FromStr for Execution {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        match s {
+            "first" => Ok(Execution::First),
+            "ensemble" => Ok(Execution::Ensemble),
+            n => match n.parse::<usize>() {
+                Ok(k) if k >= 1 => Ok(Execution::Replan(k)),
+                _ => Err(format!(
+                    "execution `{s}`: expected `first`, `ensemble` or a step count N ≥ 1"
+                )),
+            },
+        }
+    }
+}
+
+impl std::fmt::Display for Execution {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Execution::First => f.write_str("first"),
+            Execution::Ensemble => f.write_str("ensemble"),
+            Execution::Replan(n) => write!(f, "{n}"),
+        }
+    }
+}
+
+/// The executed action of this step from the newest normalised chunk `chunk` (`[H_a][A]`) and
+/// the state `recent` of [`Execution`] (ensemble: earlier chunks, newest first; replan: the
+/// actions still queued).
+fn execute(
+    execution: Execution,
+    recent: &mut std::collections::VecDeque<Vec<Vec<f32>>>,
+    chunk: Vec<Vec<f32>>,
+) -> Option<Vec<f32>> {
+    match execution {
+        Execution::First => chunk.into_iter().next(),
+        Execution::Ensemble => {
+            let h = chunk.len();
+            recent.push_front(chunk);
+            recent.truncate(h);
+            let mut sum = vec![0f32; recent.front()?.first()?.len()];
+            let mut n = 0f32;
+            for (age, c) in recent.iter().enumerate() {
+                if let Some(a) = c.get(age) {
+                    sum.iter_mut().zip(a).for_each(|(s, v)| *s += v);
+                    n += 1.0;
+                }
+            }
+            Some(sum.into_iter().map(|s| s / n).collect())
+        }
+        Execution::Replan(n) => {
+            // `recent` holds one chunk: the actions still to run, the next one last.
+            if recent.front().is_none_or(Vec::is_empty) {
+                let mut queue = chunk;
+                queue.truncate(n);
+                queue.reverse();
+                recent.clear();
+                recent.push_front(queue);
+            }
+            recent.front_mut()?.pop()
+        }
+    }
+}
+
 /// A trained model run step by step through the policy's one input path
 /// ([`model::Processor`], saved with the run): each step the agentview frame (with the oracle
 /// variant also the objects' boxes and labels; in state mode instead the objects' poses, grasps
 /// and oracle labels), the instruction and the goal progress
 /// the environment reports go in (the processor decides what the variant reads of them, exactly
-/// as in training); the first action of the predicted chunk comes out,
+/// as in training); the action [`Execution`] picks from the predicted chunks (by default the
+/// first of this step's chunk) comes out,
 /// un-normalised by the processor, clamped to [−1, 1], with the gripper binarised by its sign
 /// (as upstream `mem_6`).
 pub struct ModelPolicy {
@@ -118,9 +197,17 @@ pub struct ModelPolicy {
     grid: [usize; 2],
     seed: u64,
     labels: Option<LabelTracker>,
+    execution: Execution,
+    recent: std::collections::VecDeque<Vec<Vec<f32>>>,
 }
 
 impl ModelPolicy {
+    /// The same policy executing its chunks by `execution`.
+    pub fn with_execution(mut self, execution: Execution) -> Self {
+        self.execution = execution;
+        self
+    }
+
     /// Wraps a loaded model with its run's processor.
     pub fn new(
         model: model::PolicyModel,
@@ -137,6 +224,8 @@ impl ModelPolicy {
             grid,
             seed: 0,
             labels: None,
+            execution: Execution::First,
+            recent: std::collections::VecDeque::new(),
         })
     }
 
@@ -227,14 +316,14 @@ impl Policy for ModelPolicy {
         self.instruction = task.instruction.clone();
         self.seed = seed;
         self.labels = None;
+        self.recent.clear();
         Ok(())
     }
 
     fn act(&mut self, env: &Env, obs: &Observation) -> Result<[f32; 7], EvalError> {
         let input = self.input(env, obs)?;
         let chunk = self.policy.act_input(input)?;
-        let first: [f32; 7] = chunk
-            .first()
+        let first: [f32; 7] = execute(self.execution, &mut self.recent, chunk)
             .and_then(|a| a.as_slice().try_into().ok())
             .ok_or_else(|| EvalError::Model("the model returned no 7-D action".into()))?;
         Ok(finish_action(self.processor.unnormalize(first)))
@@ -258,6 +347,46 @@ impl Policy for ModelPolicy {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A chunk of `h` one-dimensional actions `base + i`.
+    fn chunk(base: f32, h: usize) -> Vec<Vec<f32>> {
+        (0..h).map(|i| vec![base + i as f32]).collect()
+    }
+
+    #[test]
+    fn execution_modes_pick_first_ensemble_or_queued_actions() {
+        let mut recent = std::collections::VecDeque::new();
+        let run = |e: Execution, recent: &mut std::collections::VecDeque<Vec<Vec<f32>>>| {
+            recent.clear();
+            (0..5)
+                .map(|t| execute(e, recent, chunk(10.0 * t as f32, 3)).unwrap()[0])
+                .collect::<Vec<f32>>()
+        };
+        assert_eq!(
+            run(Execution::First, &mut recent),
+            [0.0, 10.0, 20.0, 30.0, 40.0]
+        );
+        // Step t averages chunk t's action 0, chunk t−1's action 1 and chunk t−2's action 2.
+        assert_eq!(
+            run(Execution::Ensemble, &mut recent),
+            [0.0, 5.5, 11.0, 21.0, 31.0]
+        );
+        // Two actions of chunk 0, two of chunk 2, then chunk 4's first.
+        assert_eq!(
+            run(Execution::Replan(2), &mut recent),
+            [0.0, 1.0, 20.0, 21.0, 40.0]
+        );
+        // N past the horizon runs the whole chunk, then replans.
+        assert_eq!(
+            run(Execution::Replan(9), &mut recent),
+            [0.0, 1.0, 2.0, 30.0, 31.0]
+        );
+        assert_eq!("ensemble".parse(), Ok(Execution::Ensemble));
+        assert_eq!("5".parse(), Ok(Execution::Replan(5)));
+        assert_eq!(Execution::Replan(5).to_string(), "5");
+        let e = "0".parse::<Execution>().unwrap_err();
+        assert!(e.contains("`first`, `ensemble` or a step count"), "{e}");
+    }
 
     #[test]
     fn finish_action_clamps_and_binarises() {

@@ -66,6 +66,9 @@ pub struct Results {
     pub run: Option<String>,
     /// Training step of the evaluated checkpoint.
     pub checkpoint_step: Option<u64>,
+    /// How a model's action chunks were executed (`eval --execute`), when not the first action.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub execution: Option<String>,
     /// Base seed.
     pub seed: u64,
     /// Episodes per task.
@@ -156,7 +159,11 @@ impl Results {
 
     /// `results.md`: the header and the table.
     pub fn markdown(&self) -> String {
-        format!("{}{}", self.header(), markdown(&self.tasks))
+        let mut head = self.header();
+        if let Some(e) = &self.execution {
+            head = format!("{}, chunks executed: {e}\n\n", head.trim_end());
+        }
+        format!("{head}{}", markdown(&self.tasks))
     }
 }
 
@@ -611,6 +618,7 @@ mod tests {
             policy: "model".into(),
             run: None,
             checkpoint_step: None,
+            execution: None,
             seed: 0,
             episodes_per_task: 1,
             full_budget: false,

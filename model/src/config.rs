@@ -278,6 +278,11 @@ pub struct DecoderConfig {
     /// Query layout (absent in configs written before it existed: `value`).
     #[serde(default)]
     pub queries: QueryLayout,
+    /// FiLM the visual/object tokens with the pooled instruction before the first layer
+    /// (γ, β from one linear map, zero-initialised), so that the learned queries' attention can
+    /// depend on the instruction already in the first layer (absent: false).
+    #[serde(default)]
+    pub film: bool,
 }
 
 /// Language: word-level tokenizer over a fixed vocabulary + learned embeddings (model.md §8).
@@ -387,6 +392,7 @@ impl ModelConfig {
                 action_dim: 7,
                 head: ActionHead::L1,
                 queries: QueryLayout::Value,
+                film: false,
             },
             text: TextConfig {
                 vocab: Vec::new(),
@@ -451,6 +457,7 @@ impl ModelConfig {
                 action_dim: 7,
                 head: ActionHead::L1,
                 queries: QueryLayout::Value,
+                film: false,
             },
             text: TextConfig {
                 vocab: Vec::new(),

@@ -4,7 +4,7 @@
 //! OpenVLA-OFT) or a 256-bin classification head (OpenVLA).
 
 use burn::module::Param;
-use burn::nn::{LayerNorm, Linear, LinearConfig};
+use burn::nn::{Initializer, LayerNorm, Linear, LinearConfig};
 use burn::prelude::*;
 use burn::tensor::Distribution;
 use burn::tensor::activation::gelu;
@@ -118,6 +118,8 @@ pub struct ActionDecoder {
     pub action_dim: usize,
     /// One query per chunk step (else one per action value).
     pub step_queries: bool,
+    /// FiLM of the visual tokens from the pooled instruction `[D_dec, 2·D_dec]` (γ | β).
+    pub film: Option<Linear>,
 }
 
 impl ActionDecoder {
@@ -155,7 +157,30 @@ impl ActionDecoder {
             horizon: h,
             action_dim: a,
             step_queries: step,
+            film: config.film.then(|| {
+                LinearConfig::new(w, 2 * w)
+                    .with_initializer(Initializer::Zeros)
+                    .init(device)
+            }),
         }
+    }
+
+    /// The visual tokens modulated by the instruction: x·(1 + γ) + β with [γ | β] a linear map of
+    /// the mean of the unpadded language tokens (unchanged without FiLM).
+    ///
+    /// # Shapes
+    /// - visual: `[N, V, D_dec]`; lang: `[N, L_txt, D_dec]`, lang_pad: `[N, L_txt]` → `[N, V, D_dec]`
+    fn modulate(&self, visual: Tensor<3>, lang: Tensor<3>, lang_pad: Tensor<2, Bool>) -> Tensor<3> {
+        let Some(film) = &self.film else {
+            return visual;
+        };
+        let w = visual.dims()[2];
+        let keep = lang_pad.bool_not().float().unsqueeze_dim::<3>(2); // [N, L_txt, 1]
+        let pooled = (lang * keep.clone()).sum_dim(1) / keep.sum_dim(1).clamp_min(1.0); // [N, 1, D]
+        let gb = film.forward(pooled); // [N, 1, 2·D]
+        let gamma = gb.clone().narrow(2, 0, w);
+        let beta = gb.narrow(2, w, w);
+        visual * (gamma + 1.0) + beta
     }
 
     /// Width D_dec.
@@ -184,6 +209,7 @@ impl ActionDecoder {
         let (h, a) = (self.horizon, self.action_dim);
         let q = if self.step_queries { h } else { h * a };
         let device = visual.device();
+        let visual = self.modulate(visual, lang.clone(), lang_pad.clone());
         let seg = self.segment.val();
         let lang = lang + seg.clone().narrow(0, 0, 1).unsqueeze_dim::<3>(0);
         let queries = (self.queries.val() + seg.narrow(0, 1, 1))
@@ -243,6 +269,7 @@ mod tests {
             action_dim: 7,
             head,
             queries: QueryLayout::Value,
+            film: false,
         }
     }
 
@@ -308,6 +335,50 @@ mod tests {
             assert_eq!(out.actions.dims(), [4, 3, 7]);
             assert_eq!(out.logits.unwrap().dims(), [4, 3, 7, 256]);
         }
+    }
+
+    #[test]
+    fn film_starts_as_identity_and_reads_only_unpadded_words() {
+        let (_guard, device) = test_device();
+        let c = DecoderConfig {
+            film: true,
+            ..cfg(ActionHead::L1)
+        };
+        let mut dec = ActionDecoder::new(&c, &device);
+        let vis = Tensor::<3>::random([2, 5, 16], Distribution::Default, &device);
+        let lang = Tensor::<3>::random([2, 6, 16], Distribution::Default, &device);
+        let pad =
+            Tensor::<2>::from_floats([[0.0; 6], [0., 0., 0., 0., 1., 1.]], &device).equal_elem(1.0);
+        let with = dec
+            .forward(vis.clone(), None, lang.clone(), pad.clone())
+            .actions;
+        let film = dec.film.take();
+        let without = dec
+            .forward(vis.clone(), None, lang.clone(), pad.clone())
+            .actions;
+        with.into_data()
+            .assert_approx_eq::<f32>(&without.into_data(), burn::tensor::Tolerance::default());
+        // With trained (here random) weights the instruction modulates the tokens, and padded
+        // words do not.
+        dec.film = film.map(|_| LinearConfig::new(16, 32).init(&device));
+        let base = dec.modulate(vis.clone(), lang.clone(), pad.clone());
+        assert!(
+            (base.clone() - vis.clone())
+                .abs()
+                .max()
+                .into_scalar::<f32>()
+                > 1e-3
+        );
+        let noise = Tensor::<3>::random([2, 2, 16], Distribution::Default, &device);
+        let mut lang2 = lang.clone();
+        lang2 = lang2.slice_assign([1..2, 4..6, 0..16], noise.narrow(0, 1, 1));
+        let padded_changed = dec.modulate(vis.clone(), lang2, pad.clone());
+        base.clone().into_data().assert_approx_eq::<f32>(
+            &padded_changed.into_data(),
+            burn::tensor::Tolerance::default(),
+        );
+        let other = dec.modulate(vis, lang + 1.0, pad);
+        assert!((base - other).abs().max().into_scalar::<f32>() > 1e-3);
     }
 
     #[test]
