@@ -1,0 +1,51 @@
+#!/usr/bin/env bash
+# LIBERO-Goal with one state-mode policy per task (the per-task runs beside the suite's multi-task
+# model): for each of the 10 tasks, trains configs/state/libero_goal.toml on that task's 150 demos
+# only (its folder of datasets/libero_goal_150p) for STEPS steps, then evaluates it on 20 held-out
+# seeds from 1000 under the full budget, as the experiment does. Runs resume; a run evaluated
+# already is skipped. Ends with one table, a row per task (its run's row of eval's results.md) and
+# the means, printed and written to OUT.
+#
+#   bash scripts/libero_goal_per_task.sh [STEPS=3000] [JOBS=2] [OUT=docs/libero_goal_per_task.md]
+#
+# Needs the dataset (`cargo run --release -p sim -- generate --task libero_goal --episodes 155 --val 5
+# --seed 0 --out datasets/libero_goal_150p --workers 2 --plain-expert --size 32`) and release builds
+# of train and eval.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+steps=${1:-3000}
+jobs=${2:-2}
+out=${3:-docs/libero_goal_per_task.md}
+data=datasets/libero_goal_150p
+[[ -d $data ]] || { echo "error: $data is missing (see the header of $0 for the command that records it)" >&2; exit 2; }
+[[ -x target/release/train && -x target/release/eval ]] || { echo "error: build first: cargo build --release -p train -p eval" >&2; exit 2; }
+
+one() {
+  local task=$1 steps=$2 data=$3
+  local stem=${task#libero_goal/}
+  local run=runs/lg_task_${stem}_${steps}
+  if [[ ! -f $run/eval/results.json ]]; then
+    ./target/release/train configs/state/libero_goal.toml --quiet --steps "$steps" --run-dir "$run" \
+      --set "name=\"lg_task_${stem}_${steps}\"" --set train.stagger=false \
+      --set "data.dir=\"$data/libero_goal_${stem}\"" --set "eval.tasks=[\"$task\"]" >"$run.log" 2>&1
+    ./target/release/eval --run "$run" --tasks "$task" --episodes 20 --seed 1000 --full-budget \
+      --workers 1 --quiet >>"$run.log" 2>&1
+  fi
+  echo "$run"
+}
+export -f one
+mkdir -p runs
+tasks=$(./target/release/sim tasks | awk '$1 ~ /^libero_goal\// {print $1}')
+runs=$(printf '%s\n' $tasks | xargs -P "$jobs" -I{} bash -c 'one "$@"' _ {} "$steps" "$data" | sort)
+{
+  echo "LIBERO-Goal, one state-mode e_slotssm_oracle policy per task, $steps steps each on the task's"
+  echo "150 demos (\`bash scripts/libero_goal_per_task.sh $steps\`); 20 seeds from 1000, full budget."
+  echo
+  echo "| task | episodes | subgoal completion % (95 % CI) | success % (95 % CI) | mean steps | over-repetition |"
+  echo "|---|---:|---:|---:|---:|---:|"
+  for r in $runs; do grep '^| libero_goal/' "$r/eval/results.md"; done
+} >"$out.tmp"
+awk -F'|' '/^\| libero_goal\// {c += $4; s += $5; n++} END {printf "| **mean of %d policies** | | %.1f | %.1f | | |\n", n, c / n, s / n}' \
+  "$out.tmp" >>"$out.tmp"
+mv "$out.tmp" "$out"
+cat "$out"
