@@ -21,6 +21,9 @@ data=datasets/libero_goal_150p
 [[ -x target/release/train && -x target/release/eval ]] || { echo "error: build first: cargo build --release -p train -p eval" >&2; exit 2; }
 
 one() {
+  # Run by xargs in a fresh bash, which does not inherit the options set above: a failed
+  # training or evaluation must fail this task (and, through xargs, the script).
+  set -euo pipefail
   local task=$1 steps=$2 data=$3
   local stem=${task#libero_goal/}
   local run=runs/lg_task_${stem}_${steps}
@@ -36,7 +39,10 @@ one() {
 export -f one
 mkdir -p runs
 tasks=$(./target/release/sim tasks | awk '$1 ~ /^libero_goal\// {print $1}')
-runs=$(printf '%s\n' $tasks | xargs -P "$jobs" -I{} bash -c 'one "$@"' _ {} "$steps" "$data" | sort)
+runs=$(printf '%s\n' $tasks | xargs -P "$jobs" -I{} bash -c 'one "$@"' _ {} "$steps" "$data" | sort) || {
+  echo "error: a task's training or evaluation failed; see runs/lg_task_*_$steps.log" >&2
+  exit 1
+}
 {
   echo "LIBERO-Goal, one state-mode e_slotssm_oracle policy per task, $steps steps each on the task's"
   echo "150 demos (\`bash scripts/libero_goal_per_task.sh $steps\`); 20 seeds from 1000, full budget."
