@@ -59,7 +59,7 @@ fn every_experiment_run_loads_as_train_will_see_it() {
         for p in x.plan() {
             let spec = p.spec;
             let config = e2e::repo_root().join(&spec.config);
-            let sets = eval::experiment::train_overrides(spec, &p.name, &p.variant);
+            let sets = eval::experiment::train_overrides(&p);
             let cfg = train::Config::load_with(&config, &sets).unwrap_or_else(|e| {
                 panic!(
                     "{}: run `{}` ({} with {:?}) does not load: {e}",

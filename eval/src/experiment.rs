@@ -21,6 +21,9 @@
 //! suite = "libero_mem"      # the tasks evaluated (eval's --tasks syntax)
 //! config = "configs/state/libero_mem.toml"
 //! variants = ["e_slotssm_oracle", "e_slotssm", "slotvla_h1", "slotvla_h8", "dense"]
+//! # tag = "hold"          # optional: a recipe's name, `+hold` in the tables
+//! # set = ["train.steps=8000"]   # optional: `train --set` overrides
+//! # seeds = [1, 2]        # optional: the same runs again at these `train.seed`s (`+seed1`, …)
 //! ```
 
 use std::collections::BTreeMap;
@@ -90,6 +93,11 @@ pub struct RunSpec {
     /// Further `KEY=VALUE` overrides given to `train --set`.
     #[serde(default)]
     pub set: Vec<String>,
+    /// Further training seeds: besides the run at the config's own `train.seed`, one more run
+    /// per variant and seed N (`train.seed=N`), named `…_seedN` and listed as `<label>+seedN`, so
+    /// the tables show how far one recipe's result moves from one training run to the next.
+    #[serde(default)]
+    pub seeds: Vec<u64>,
 }
 
 /// One run of an experiment's plan.
@@ -101,8 +109,10 @@ pub struct Planned<'a> {
     pub name: String,
     /// Variant trained.
     pub variant: String,
-    /// Variant with the group's tag, as the tables show it.
+    /// Variant with the group's tag (and `+seedN` for a further seed), as the tables show it.
     pub label: String,
+    /// The further training seed of this run (None: the config's own).
+    pub seed: Option<u64>,
 }
 
 impl Planned<'_> {
@@ -186,10 +196,20 @@ impl Experiment {
                 }
                 out.push(Planned {
                     spec: r,
-                    name,
+                    name: name.clone(),
                     variant: v.clone(),
-                    label,
+                    label: label.clone(),
+                    seed: None,
                 });
+                for &seed in &r.seeds {
+                    out.push(Planned {
+                        spec: r,
+                        name: format!("{name}_seed{seed}"),
+                        variant: v.clone(),
+                        label: format!("{label}+seed{seed}"),
+                        seed: Some(seed),
+                    });
+                }
             }
         }
         out
@@ -210,19 +230,21 @@ fn slug(s: &str) -> String {
 }
 
 /// The `train --set` overrides of one run, in the order [`train`] gives them (later ones win):
-/// its name, its variant, then the group's `set`.
-pub fn train_overrides(spec: &RunSpec, name: &str, variant: &str) -> Vec<String> {
+/// its name, its variant, the group's `set`, then its further seed.
+pub fn train_overrides(p: &Planned) -> Vec<String> {
     let mut out = vec![
-        format!("name=\"{name}\""),
-        format!("model.variant=\"{variant}\""),
+        format!("name=\"{}\"", p.name),
+        format!("model.variant=\"{}\"", p.variant),
     ];
-    out.extend(spec.set.iter().cloned());
+    out.extend(p.spec.set.iter().cloned());
+    out.extend(p.seed.map(|s| format!("train.seed={s}")));
     out
 }
 
-/// Trains a run with the `train` binary found next to this executable (resuming on its own);
-/// its output goes to `RUN/train.log`.
-pub fn train(spec: &RunSpec, name: &str, variant: &str, runs_dir: &Path) -> Result<(), EvalError> {
+/// Trains the run `p` with the `train` binary found next to this executable (resuming on its
+/// own); its output goes to `RUN/train.log`.
+pub fn train(p: &Planned, runs_dir: &Path) -> Result<(), EvalError> {
+    let (spec, name) = (p.spec, p.name.as_str());
     let exe = std::env::current_exe().map_err(|e| EvalError::Argument(e.to_string()))?;
     let bin = exe.with_file_name(format!("train{}", std::env::consts::EXE_SUFFIX));
     if !bin.is_file() {
@@ -254,7 +276,7 @@ pub fn train(spec: &RunSpec, name: &str, variant: &str, runs_dir: &Path) -> Resu
         .arg("--quiet")
         .arg("--run-dir")
         .arg(&run);
-    for s in train_overrides(spec, name, variant) {
+    for s in train_overrides(p) {
         cmd.arg("--set").arg(s);
     }
     let status = cmd
@@ -1135,6 +1157,48 @@ mod tests {
                 ),
             ]
         );
+        // Further seeds: one more run per variant and seed, its seed given last to `train`.
+        std::fs::write(
+            &p,
+            "name = \"x\"\nout = \"d\"\n[[runs]]\nobs = \"state\"\nsuite = \"t1\"\nconfig = \"c.toml\"\nvariants = [\"e_slotssm\", \"dense\"]\ntag = \"hold\"\nset = [\"train.seed=7\", \"data.dir=\\\"d\\\"\"]\nseeds = [1, 2]\n",
+        )
+        .unwrap();
+        let x = Experiment::load(&p).unwrap();
+        let plan = x.plan();
+        let named: Vec<(&str, &str, Option<u64>)> = plan
+            .iter()
+            .map(|p| (p.name.as_str(), p.label.as_str(), p.seed))
+            .collect();
+        assert_eq!(
+            named,
+            [
+                ("x_state_t1_e_slotssm_hold", "e_slotssm+hold", None),
+                (
+                    "x_state_t1_e_slotssm_hold_seed1",
+                    "e_slotssm+hold+seed1",
+                    Some(1)
+                ),
+                (
+                    "x_state_t1_e_slotssm_hold_seed2",
+                    "e_slotssm+hold+seed2",
+                    Some(2)
+                ),
+                ("x_state_t1_dense_hold", "dense+hold", None),
+                ("x_state_t1_dense_hold_seed1", "dense+hold+seed1", Some(1)),
+                ("x_state_t1_dense_hold_seed2", "dense+hold+seed2", Some(2)),
+            ]
+        );
+        assert_eq!(
+            train_overrides(&plan[2]),
+            [
+                "name=\"x_state_t1_e_slotssm_hold_seed2\"",
+                "model.variant=\"e_slotssm\"",
+                "train.seed=7",
+                "data.dir=\"d\"",
+                "train.seed=2",
+            ]
+        );
+        assert_eq!(train_overrides(&plan[0]).last().unwrap(), "data.dir=\"d\"");
         std::fs::write(&p, "name = \"x\"\nout = \"d\"\nrunz = []\n").unwrap();
         let e = Experiment::load(&p).unwrap_err().to_string();
         assert!(e.contains("runz") && e.contains("x.toml"), "{e}");

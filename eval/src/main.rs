@@ -510,7 +510,7 @@ fn experiment(
         let (alone, side_by_side) = exp::training_waves(&todo, exp::dataset_ready);
         for p in &alone {
             bar.set_message(format!("{}: training (generates its dataset)", p.name));
-            exp::train(p.spec, &p.name, &p.variant, &x.runs_dir)?;
+            exp::train(p, &x.runs_dir)?;
         }
         bar.set_message(format!(
             "training {} runs, {} at once",
@@ -523,7 +523,7 @@ fn experiment(
             || Ok(()),
             |_, k| {
                 let p = side_by_side[k];
-                exp::train(p.spec, &p.name, &p.variant, &x.runs_dir)
+                exp::train(p, &x.runs_dir)
             },
             || EvalError::Model("a training thread panicked".into()),
         )?;
@@ -541,7 +541,7 @@ fn experiment(
         }
         if !pretrained {
             bar.set_message(format!("{}: training", p.name));
-            exp::train(p.spec, &p.name, &p.variant, &x.runs_dir)?;
+            exp::train(p, &x.runs_dir)?;
         }
         let rd = eval::run::open(&run)?;
         let device = eval::run::device(&rd)?;
