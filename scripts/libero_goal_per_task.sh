@@ -1,22 +1,40 @@
 #!/usr/bin/env bash
 # LIBERO-Goal with one state-mode policy per task (the per-task runs beside the suite's multi-task
 # model): for each of the 10 tasks, trains configs/state/libero_goal.toml on that task's 150 demos
-# only (its folder of datasets/libero_goal_150p) for STEPS steps, then evaluates it on 20 held-out
-# seeds from 1000 under the full budget, as the experiment does. Runs resume; a run evaluated
-# already is skipped. Ends with one table, a row per task (its run's row of eval's results.md) and
-# the means, printed and written to OUT.
+# only (its folder of DATA) for STEPS steps, then evaluates it on 20 held-out seeds from 1000 under
+# the full budget, as the experiment does. Runs resume; a run evaluated already is skipped. Ends
+# with one table, a row per task (its run's row of eval's results.md) and the means, printed and
+# written to OUT.
 #
-#   bash scripts/libero_goal_per_task.sh [STEPS=3000] [JOBS=2] [OUT=docs/libero_goal_per_task.md]
+#   bash scripts/libero_goal_per_task.sh [STEPS=3000] [JOBS=2] [OUT=docs/libero_goal_per_task.md] [DATA=datasets/libero_goal_150ph] [SEED=0]
 #
-# Needs the dataset (`cargo run --release -p sim -- generate --task libero_goal --episodes 155 --val 5
-# --seed 0 --out datasets/libero_goal_150p --workers 2 --plain-expert --size 32`) and release builds
+# SEED is the training seed (`train.seed`; runs other than seed 0 get `_seed<SEED>` appended to their
+# names), and TASKS (environment, comma-separated task names without `libero_goal/`) limits the run
+# to those tasks, e.g. the seed spread of the README:
+#   TASKS=push_the_plate_to_the_front_of_the_stove,open_the_middle_drawer_of_the_cabinet \
+#     bash scripts/libero_goal_per_task.sh 3000 2 /tmp/seed1.md datasets/libero_goal_150p 1
+#
+# DATA is a suite dataset with one folder per task. The default, demos that go on after the goal
+# to release, retreat and stand still for 30 steps (what a policy evaluated over the full budget
+# must do):
+#   cargo run --release -p sim -- generate --task libero_goal --episodes 155 --val 5 --seed 0 \
+#     --out datasets/libero_goal_150ph --workers 2 --plain-expert --size 32 --hold-steps 30
+# (without `--hold-steps 30` and with `--out datasets/libero_goal_150p`: demos that end 10 steps
+# after the goal, the multi-task config's data). Runs are named runs/lg_task_<task>_<STEPS>, with
+# `_<DATA's folder name>` appended for any DATA but datasets/libero_goal_150p. Needs release builds
 # of train and eval.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 steps=${1:-3000}
 jobs=${2:-2}
 out=${3:-docs/libero_goal_per_task.md}
-data=datasets/libero_goal_150p
+data=${4:-datasets/libero_goal_150ph}
+data=${data%/}
+suffix=""
+[[ $data == datasets/libero_goal_150p ]] || suffix="_$(basename "$data")"
+seed=${5:-0}
+[[ $seed =~ ^[0-9]+$ ]] || { echo "error: SEED \`$seed\` is not a non-negative integer" >&2; exit 2; }
+[[ $seed == 0 ]] || suffix="${suffix}_seed$seed"
 [[ -d $data ]] || { echo "error: $data is missing (see the header of $0 for the command that records it)" >&2; exit 2; }
 [[ -x target/release/train && -x target/release/eval ]] || { echo "error: build first: cargo build --release -p train -p eval" >&2; exit 2; }
 
@@ -24,12 +42,12 @@ one() {
   # Run by xargs in a fresh bash, which does not inherit the options set above: a failed
   # training or evaluation must fail this task (and, through xargs, the script).
   set -euo pipefail
-  local task=$1 steps=$2 data=$3
+  local task=$1 steps=$2 data=$3 suffix=$4 seed=$5
   local stem=${task#libero_goal/}
-  local run=runs/lg_task_${stem}_${steps}
+  local run=runs/lg_task_${stem}_${steps}${suffix}
   if [[ ! -f $run/eval/results.json ]]; then
     ./target/release/train configs/state/libero_goal.toml --quiet --steps "$steps" --run-dir "$run" \
-      --set "name=\"lg_task_${stem}_${steps}\"" --set train.stagger=false \
+      --set "name=\"lg_task_${stem}_${steps}${suffix}\"" --set train.stagger=false --set "train.seed=$seed" \
       --set "data.dir=\"$data/libero_goal_${stem}\"" --set "eval.tasks=[\"$task\"]" >"$run.log" 2>&1
     ./target/release/eval --run "$run" --tasks "$task" --episodes 20 --seed 1000 --full-budget \
       --workers 1 --quiet >>"$run.log" 2>&1
@@ -39,13 +57,28 @@ one() {
 export -f one
 mkdir -p runs
 tasks=$(./target/release/sim tasks | awk '$1 ~ /^libero_goal\// {print $1}')
-runs=$(printf '%s\n' $tasks | xargs -P "$jobs" -I{} bash -c 'one "$@"' _ {} "$steps" "$data" | sort) || {
-  echo "error: a task's training or evaluation failed; see runs/lg_task_*_$steps.log" >&2
+if [[ -n ${TASKS:-} ]]; then
+  picked=""
+  for t in ${TASKS//,/ }; do
+    grep -qx "libero_goal/$t" <<<"$tasks" || { echo "error: TASKS: \`$t\` is not a LIBERO-Goal task (\`sim tasks\` lists them)" >&2; exit 2; }
+    picked="$picked libero_goal/$t"
+  done
+  tasks=$picked
+fi
+for t in $tasks; do
+  [[ -f $data/libero_goal_${t#libero_goal/}/index.json ]] || {
+    echo "error: $data/libero_goal_${t#libero_goal/} holds no generated dataset (see the header of $0 for the command that records it)" >&2
+    exit 2
+  }
+done
+runs=$(printf '%s\n' $tasks | xargs -P "$jobs" -I{} bash -c 'one "$@"' _ {} "$steps" "$data" "$suffix" "$seed" | sort) || {
+  echo "error: a task's training or evaluation failed; see runs/lg_task_*_$steps$suffix.log" >&2
   exit 1
 }
 {
-  echo "LIBERO-Goal, one state-mode e_slotssm_oracle policy per task, $steps steps each on the task's"
-  echo "150 demos (\`bash scripts/libero_goal_per_task.sh $steps\`); 20 seeds from 1000, full budget."
+  echo "LIBERO-Goal, one state-mode e_slotssm_oracle policy per task, $steps steps each (training seed"
+  echo "$seed) on the task's 150 demos of $data; 20 seeds from 1000, full budget:"
+  echo "\`${TASKS:+TASKS=$TASKS }bash scripts/libero_goal_per_task.sh $steps $jobs $out $data $seed\`"
   echo
   echo "| task | episodes | subgoal completion % (95 % CI) | success % (95 % CI) | mean steps | over-repetition |"
   echo "|---|---:|---:|---:|---:|---:|"
