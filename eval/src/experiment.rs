@@ -897,10 +897,11 @@ pub fn svg(runs: &[RunResult]) -> String {
 }
 
 /// Loads a finished run's evaluation (None when it has not been evaluated with the
-/// experiment's protocol).
+/// experiment's protocol, which executes the first action of each chunk: an `eval --execute`
+/// other than `first` written to the run's `eval/` is not one of its results).
 pub fn load_result(x: &Experiment, run: &Path, obs: &str, label: &str) -> Option<RunResult> {
     let (_, r) = Results::load(&run.join("eval")).ok()?;
-    if !x.same_protocol(r.episodes_per_task, r.seed, r.full_budget) {
+    if !x.same_protocol(r.episodes_per_task, r.seed, r.full_budget) || r.execution.is_some() {
         return None;
     }
     let (train_s, steps) = training_cost(run);
@@ -1012,6 +1013,45 @@ mod tests {
             runs_dir: "runs".into(),
             runs: vec![],
         }
+    }
+
+    /// A run's evaluation is the experiment's only with its protocol: episodes, seed, budget,
+    /// and the first action of each chunk executed.
+    #[test]
+    fn load_result_takes_only_the_experiments_protocol() {
+        let x = experiment();
+        let dir = tempfile::tempdir().unwrap();
+        let run = dir.path().join("r");
+        std::fs::create_dir_all(run.join("eval")).unwrap();
+        let write = |r: &Results| {
+            std::fs::write(
+                run.join("eval/results.json"),
+                serde_json::to_string(r).unwrap(),
+            )
+            .unwrap();
+        };
+        let mut r = Results {
+            policy: "model".into(),
+            run: None,
+            checkpoint_step: None,
+            execution: None,
+            seed: 1000,
+            episodes_per_task: 20,
+            full_budget: true,
+            shard: data::shard::Shard::WHOLE,
+            tasks: vec![row("libero_mem/t1", 50.0, 40.0)],
+            episodes: vec![],
+        };
+        write(&r);
+        let got = load_result(&x, &run, "state", "e_slotssm").unwrap();
+        assert_eq!((got.variant.as_str(), got.tasks.len()), ("e_slotssm", 1));
+        r.execution = Some("ensemble".into());
+        write(&r);
+        assert!(load_result(&x, &run, "state", "e_slotssm").is_none());
+        r.execution = None;
+        r.full_budget = false;
+        write(&r);
+        assert!(load_result(&x, &run, "state", "e_slotssm").is_none());
     }
 
     fn state_run(variant: &str, tasks: Vec<TaskSummary>) -> RunResult {

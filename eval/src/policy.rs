@@ -323,10 +323,10 @@ impl Policy for ModelPolicy {
     fn act(&mut self, env: &Env, obs: &Observation) -> Result<[f32; 7], EvalError> {
         let input = self.input(env, obs)?;
         let chunk = self.policy.act_input(input)?;
-        let first: [f32; 7] = execute(self.execution, &mut self.recent, chunk)
+        let action: [f32; 7] = execute(self.execution, &mut self.recent, chunk)
             .and_then(|a| a.as_slice().try_into().ok())
             .ok_or_else(|| EvalError::Model("the model returned no 7-D action".into()))?;
-        Ok(finish_action(self.processor.unnormalize(first)))
+        Ok(finish_action(self.processor.unnormalize(action)))
     }
 
     fn needs_images(&self) -> bool {
