@@ -14,6 +14,11 @@
 #   TASKS=push_the_plate_to_the_front_of_the_stove,open_the_middle_drawer_of_the_cabinet \
 #     bash scripts/libero_goal_per_task.sh 3000 2 /tmp/seed1.md datasets/libero_goal_150p 1
 #
+# MASK_IDLE_TAIL=1 (environment) trains with `data.mask_idle_tail = true` (no action loss on the
+# demos' idle tail: the arm standing still after its last move); its runs get `_masktail`.
+# FINGERS=0 (environment) trains with `model.state_fingers = false` (the robot token without the
+# finger joints, so the gripper command cannot be copied from them); its runs get `_nofingers`.
+#
 # DATA is a suite dataset with one folder per task. The default, demos that go on after the goal
 # to release, retreat and stand still for 30 steps (what a policy evaluated over the full budget
 # must do):
@@ -35,6 +40,14 @@ suffix=""
 seed=${5:-0}
 [[ $seed =~ ^[0-9]+$ ]] || { echo "error: SEED \`$seed\` is not a non-negative integer" >&2; exit 2; }
 [[ $seed == 0 ]] || suffix="${suffix}_seed$seed"
+mask=${MASK_IDLE_TAIL:-0}
+[[ $mask == 0 || $mask == 1 ]] || { echo "error: MASK_IDLE_TAIL \`$mask\` is not 0 or 1" >&2; exit 2; }
+[[ $mask == 0 ]] || suffix="${suffix}_masktail"
+mask_set="data.mask_idle_tail=$([[ $mask == 1 ]] && echo true || echo false)"
+fingers=${FINGERS:-1}
+[[ $fingers == 0 || $fingers == 1 ]] || { echo "error: FINGERS \`$fingers\` is not 0 or 1" >&2; exit 2; }
+[[ $fingers == 1 ]] || suffix="${suffix}_nofingers"
+fingers_set="model.state_fingers=$([[ $fingers == 1 ]] && echo true || echo false)"
 [[ -d $data ]] || { echo "error: $data is missing (see the header of $0 for the command that records it)" >&2; exit 2; }
 [[ -x target/release/train && -x target/release/eval ]] || { echo "error: build first: cargo build --release -p train -p eval" >&2; exit 2; }
 
@@ -42,13 +55,13 @@ one() {
   # Run by xargs in a fresh bash, which does not inherit the options set above: a failed
   # training or evaluation must fail this task (and, through xargs, the script).
   set -euo pipefail
-  local task=$1 steps=$2 data=$3 suffix=$4 seed=$5
+  local task=$1 steps=$2 data=$3 suffix=$4 seed=$5 mask_set=$6 fingers_set=$7
   local stem=${task#libero_goal/}
   local run=runs/lg_task_${stem}_${steps}${suffix}
   if [[ ! -f $run/eval/results.json ]]; then
     ./target/release/train configs/state/libero_goal.toml --quiet --steps "$steps" --run-dir "$run" \
       --set "name=\"lg_task_${stem}_${steps}${suffix}\"" --set train.stagger=false --set "train.seed=$seed" \
-      --set "data.dir=\"$data/libero_goal_${stem}\"" --set "eval.tasks=[\"$task\"]" >"$run.log" 2>&1
+      --set "$mask_set" --set "$fingers_set" --set "data.dir=\"$data/libero_goal_${stem}\"" --set "eval.tasks=[\"$task\"]" >"$run.log" 2>&1
     ./target/release/eval --run "$run" --tasks "$task" --episodes 20 --seed 1000 --full-budget \
       --workers 1 --quiet >>"$run.log" 2>&1
   fi
@@ -71,14 +84,16 @@ for t in $tasks; do
     exit 2
   }
 done
-runs=$(printf '%s\n' $tasks | xargs -P "$jobs" -I{} bash -c 'one "$@"' _ {} "$steps" "$data" "$suffix" "$seed" | sort) || {
+runs=$(printf '%s\n' $tasks | xargs -P "$jobs" -I{} bash -c 'one "$@"' _ {} "$steps" "$data" "$suffix" "$seed" "$mask_set" "$fingers_set" | sort) || {
   echo "error: a task's training or evaluation failed; see runs/lg_task_*_$steps$suffix.log" >&2
   exit 1
 }
 {
   echo "LIBERO-Goal, one state-mode e_slotssm_oracle policy per task, $steps steps each (training seed"
   echo "$seed) on the task's 150 demos of $data; 20 seeds from 1000, full budget:"
-  echo "\`${TASKS:+TASKS=$TASKS }bash scripts/libero_goal_per_task.sh $steps $jobs $out $data $seed\`"
+  [[ $mask == 0 ]] || echo "No action loss on the demos' idle tail (\`data.mask_idle_tail = true\`)."
+  [[ $fingers == 1 ]] || echo "The robot token without the finger joints (\`model.state_fingers = false\`)."
+  echo "\`${TASKS:+TASKS=$TASKS }${MASK_IDLE_TAIL:+MASK_IDLE_TAIL=$MASK_IDLE_TAIL }${FINGERS:+FINGERS=$FINGERS }bash scripts/libero_goal_per_task.sh $steps $jobs $out $data $seed\`"
   echo
   echo "| task | episodes | subgoal completion % (95 % CI) | success % (95 % CI) | mean steps | over-repetition |"
   echo "|---|---:|---:|---:|---:|---:|"

@@ -51,8 +51,14 @@ fn replay(obs: train::config::ObsMode) {
     let vocab = train::dataset::RunData::model_vocab(&index).unwrap();
     let mut mcfg = cfg.model_config(vocab).unwrap();
     let opened = data::OpenedDataset::from_index(&data_dir, index).unwrap();
-    let spec = (obs == train::config::ObsMode::State)
-        .then(|| train::dataset::state_spec(&opened, &cfg.model.state_relative_cm).unwrap());
+    let spec = (obs == train::config::ObsMode::State).then(|| {
+        train::dataset::state_spec(
+            &opened,
+            &cfg.model.state_relative_cm,
+            cfg.model.state_fingers,
+        )
+        .unwrap()
+    });
     if let Some(s) = &spec {
         mcfg = mcfg.with_state(s.tokens(), s.num_categories(), s.features());
     }

@@ -95,6 +95,7 @@ pub fn bench_windows(
             images: true,
             augment: Some(Augment::default()),
             seed: 0,
+            mask_idle_tail: false,
         };
         let ds = WindowDataset::open(dir, Split::Train, cfg)?;
         let mut rng = ChaCha8Rng::seed_from_u64(1);

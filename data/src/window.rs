@@ -6,8 +6,8 @@
 //! of a window is decoded once.
 
 use std::path::{Path, PathBuf};
-use std::sync::Arc;
 use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::{Arc, OnceLock};
 
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -66,6 +66,32 @@ pub struct WindowConfig {
     pub augment: Option<Augment>,
     /// Seed of the augmentation.
     pub seed: u64,
+    /// Leave the episode's idle tail out of the action targets (see [`idle_tail_start`]): the
+    /// arm standing still with an unchanged gripper command after its last move, which teaches a
+    /// policy to freeze (OpenVLA drops LIBERO's no-op steps for the same reason). The frames stay
+    /// in the windows, so carried memory still sees them.
+    pub mask_idle_tail: bool,
+}
+
+/// Largest norm of the six arm dims of an action that counts as standing still (OpenVLA's no-op
+/// threshold).
+pub const IDLE_ARM_NORM: f32 = 1e-4;
+
+/// Whether `action` stands still: arm dims within [`IDLE_ARM_NORM`] and the gripper command
+/// `gripper`.
+fn is_idle(action: &[f32; 7], gripper: f32) -> bool {
+    action[..6].iter().map(|v| v * v).sum::<f32>().sqrt() <= IDLE_ARM_NORM && action[6] == gripper
+}
+
+/// First step of the idle tail of an episode's `actions`: the steps from there to the end keep
+/// the arm still (norm ≤ [`IDLE_ARM_NORM`]) and repeat the last gripper command. `actions.len()`
+/// when the last step moves (no tail); 0 when the whole episode stands still.
+pub fn idle_tail_start(actions: &[[f32; 7]]) -> usize {
+    let Some(last) = actions.last() else {
+        return 0;
+    };
+    let g = last[6];
+    actions.len() - actions.iter().rev().take_while(|a| is_idle(a, g)).count()
 }
 
 impl Default for WindowConfig {
@@ -79,6 +105,7 @@ impl Default for WindowConfig {
             images: true,
             augment: None,
             seed: 0,
+            mask_idle_tail: false,
         }
     }
 }
@@ -173,7 +200,8 @@ pub struct WindowSample {
     pub frame_steps: Vec<usize>,
     /// Normalised action chunks `[T, H_a, 7]` (past the end: the last action repeated).
     pub actions: Vec<f32>,
-    /// `[T, H_a]`: true where the action is a real step, not a repetition past the end.
+    /// `[T, H_a]`: true where the action is a real step, not a repetition past the end (nor,
+    /// with [`WindowConfig::mask_idle_tail`], a step of the episode's idle tail).
     pub action_mask: Vec<bool>,
     /// States `[T, 8]`.
     pub states: Vec<f32>,
@@ -194,6 +222,8 @@ pub struct WindowDataset {
     cfg: WindowConfig,
     norm: ActionNorm,
     epoch: AtomicU64,
+    /// Per episode of the split, the first step of its idle tail (read once, when first needed).
+    tails: Vec<OnceLock<usize>>,
 }
 
 fn mix(mut z: u64) -> u64 {
@@ -309,12 +339,14 @@ impl WindowDataset {
             .enumerate()
             .flat_map(|(k, (_, r))| (0..r.len() as u32).map(move |t| (k as u32, t)))
             .collect();
+        let tails = readers.iter().map(|_| OnceLock::new()).collect();
         Ok(WindowDataset {
             readers,
             samples,
             cfg,
             norm,
             epoch: AtomicU64::new(0),
+            tails,
         })
     }
 
@@ -370,6 +402,21 @@ impl WindowDataset {
     /// Steps of episode `k` of the split.
     pub fn episode_len(&self, k: usize) -> usize {
         self.readers[k].1.len()
+    }
+
+    /// First step of the idle tail of episode `k` of the split ([`idle_tail_start`]), read from
+    /// its file once.
+    pub fn idle_tail(&self, k: usize) -> Result<usize> {
+        if let Some(&s) = self.tails[k].get() {
+            return Ok(s);
+        }
+        let r = &self.readers[k].1;
+        let actions: Vec<[f32; 7]> = r
+            .read_raw_steps(0..r.len())?
+            .iter()
+            .map(|s| s.action)
+            .collect();
+        Ok(*self.tails[k].get_or_init(|| idle_tail_start(&actions)))
     }
 
     /// A chunk of episode `k` of the split (position in the split, not the index): the T =
@@ -444,6 +491,11 @@ impl WindowDataset {
         };
         let images = if c.images { frames(false)? } else { Vec::new() };
         let wrist_images = if c.wrist { Some(frames(true)?) } else { None };
+        let end = if c.mask_idle_tail {
+            self.idle_tail(k)?
+        } else {
+            n
+        };
         let mut actions = Vec::with_capacity(tl * c.chunk * 7);
         let mut action_mask = Vec::with_capacity(tl * c.chunk);
         let mut states = Vec::with_capacity(tl * 8);
@@ -451,7 +503,7 @@ impl WindowDataset {
             for h in 0..c.chunk {
                 let a = (f + h).min(n - 1);
                 actions.extend(self.norm.normalize(&raw[a - lo].action));
-                action_mask.push(f + h < n);
+                action_mask.push(f + h < end);
             }
             states.extend(raw[f - lo].state);
         }

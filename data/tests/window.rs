@@ -5,10 +5,18 @@ use data::window::ActionNorm;
 use data::*;
 
 fn dataset(lens: &[usize]) -> (tempfile::TempDir, Vec<Vec<StepRecord>>) {
+    dataset_with(lens, |_, _| {})
+}
+
+/// Synthetic episodes of `lens` steps, each edited by `edit(episode, steps)` before it is written.
+fn dataset_with(
+    lens: &[usize],
+    edit: impl Fn(usize, &mut [StepRecord]),
+) -> (tempfile::TempDir, Vec<Vec<StepRecord>>) {
     let dir = tempfile::tempdir().unwrap();
     let mut all = vec![];
     for (e, &n) in lens.iter().enumerate() {
-        let steps = synthetic_steps(
+        let mut steps = synthetic_steps(
             n,
             e as u64,
             &SynthOptions {
@@ -17,6 +25,7 @@ fn dataset(lens: &[usize]) -> (tempfile::TempDir, Vec<Vec<StepRecord>>) {
                 depth: false,
             },
         );
+        edit(e, &mut steps);
         let mut w = EpisodeWriter::create(
             dir.path().join(format!("ep{e}.mcap")),
             synthetic_meta(e as u64),
@@ -323,4 +332,86 @@ fn windows_of_a_dataset_opened_once_equal_windows_of_the_split() {
         .to_string();
     assert!(err.contains(&index.episodes[1].file), "{err}");
     assert!(!err.contains(&index.episodes[3].file), "{err}");
+}
+
+#[test]
+fn idle_tail_is_the_still_suffix_with_one_gripper_command() {
+    use data::window::idle_tail_start;
+    let mv = [0.1, 0.0, 0.0, 0.0, 0.0, 0.0, -1.0];
+    let still = |g: f32| [0.0, 0.0, 0.0, 0.0, 0.0, 0.0, g];
+    let tiny = [5e-5, 0.0, 0.0, 0.0, 0.0, 0.0, -1.0];
+    assert_eq!(idle_tail_start(&[]), 0);
+    assert_eq!(
+        idle_tail_start(&[mv, mv]),
+        2,
+        "the last step moves: no tail"
+    );
+    assert_eq!(idle_tail_start(&[still(-1.0); 3]), 0, "all still: all tail");
+    assert_eq!(
+        idle_tail_start(&[mv, still(1.0), still(-1.0), tiny, still(-1.0)]),
+        2,
+        "a gripper change ends the tail; arm norms ≤ 1e-4 count as still"
+    );
+    assert_eq!(
+        idle_tail_start(&[mv, still(-1.0), [2e-4, 0.0, 0.0, 0.0, 0.0, 0.0, -1.0]]),
+        3
+    );
+}
+
+#[test]
+fn masked_idle_tail_leaves_the_frames_but_drops_their_actions() {
+    // Two episodes of 12 steps; episode 0 stands still (gripper open) from step 8 on.
+    let (dir, _) = dataset_with(&[12, 12], |e, steps| {
+        for s in steps.iter_mut() {
+            s.action[0] = 0.5; // every synthetic step moves
+        }
+        if e == 0 {
+            for s in &mut steps[8..] {
+                s.action = [0.0, 0.0, 0.0, 0.0, 0.0, 0.0, -1.0];
+            }
+        }
+    });
+    let cfg = WindowConfig {
+        past: 3,
+        future: 0,
+        chunk: 2,
+        image_size: 16,
+        images: false,
+        ..Default::default()
+    };
+    let plain = WindowDataset::open(dir.path(), Split::Train, cfg.clone()).unwrap();
+    let masked = WindowDataset::open(
+        dir.path(),
+        Split::Train,
+        WindowConfig {
+            mask_idle_tail: true,
+            ..cfg
+        },
+    )
+    .unwrap();
+    let ep0 = (0..2)
+        .find(|&k| masked.chunk(k, 0, 0).unwrap().episode == 0)
+        .unwrap();
+    assert_eq!(masked.idle_tail(ep0).unwrap(), 8);
+    assert_eq!(masked.idle_tail(1 - ep0).unwrap(), 12);
+    // The chunk of steps 6..10: frames 6, 7, 8, 9 with actions (f, f+1).
+    let (p, m) = (
+        plain.chunk(ep0, 6, 0).unwrap(),
+        masked.chunk(ep0, 6, 0).unwrap(),
+    );
+    assert_eq!(m.frame_steps, vec![6, 7, 8, 9]);
+    assert_eq!(p.action_mask, vec![true; 8]);
+    assert_eq!(
+        m.action_mask,
+        vec![true, true, true, false, false, false, false, false]
+    );
+    assert_eq!(
+        (m.frame_mask, m.actions, m.states),
+        (p.frame_mask, p.actions, p.states)
+    );
+    // The other episode has no tail: nothing changes.
+    assert_eq!(
+        masked.chunk(1 - ep0, 6, 0).unwrap(),
+        plain.chunk(1 - ep0, 6, 0).unwrap()
+    );
 }

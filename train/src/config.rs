@@ -77,10 +77,18 @@ pub struct DataConfig {
     /// Seeded colour jitter + shift augmentation (LIBERO-Mem's pipeline).
     #[serde(default = "yes")]
     pub augment: bool,
+    /// No action loss on an episode's idle tail (the arm standing still after its last move,
+    /// e.g. the hold of `generate.hold_steps`): frames that teach a policy to freeze.
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub mask_idle_tail: bool,
 }
 
 fn yes() -> bool {
     true
+}
+
+fn is_yes(v: &bool) -> bool {
+    *v
 }
 
 /// `[data].generate`: what `sim generate --task --episodes --val --seed --size --workers --out`
@@ -166,6 +174,10 @@ pub struct ModelSection {
     /// scale (none by default; see `model::io::state`).
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub state_relative_cm: Vec<f32>,
+    /// State mode: whether the robot token carries the finger joint positions (default true;
+    /// false leaves the gripper command to be read from the scene, not copied from the fingers).
+    #[serde(default = "yes", skip_serializing_if = "is_yes")]
+    pub state_fingers: bool,
     /// Size preset.
     #[serde(default = "tiny")]
     pub preset: Preset,
@@ -374,6 +386,9 @@ impl Config {
             return Err(
                 "model.state_relative_cm: only state mode (`obs = \"state\"`) reads it".into(),
             );
+        }
+        if !self.model.state_fingers && self.model.obs != ObsMode::State {
+            return Err("model.state_fingers: only state mode (`obs = \"state\"`) reads it".into());
         }
         if let Some(s) = model::io::state::bad_relative_scale(rel) {
             return Err(format!(
@@ -597,6 +612,14 @@ variant = "e_slotssm"
         });
         // Round trip through the resolved TOML.
         assert_eq!(Config::parse(&c.to_toml()).unwrap(), c);
+        // The idle tail is trained on unless asked; a run's config says so only when it is not.
+        assert!(!c.data.mask_idle_tail);
+        assert!(!c.to_toml().contains("mask_idle_tail"));
+        let m = Config::parse(&MIN.replace("dir = \"d\"", "dir = \"d\"\nmask_idle_tail = true"))
+            .unwrap();
+        assert!(m.data.mask_idle_tail);
+        assert!(m.to_toml().contains("mask_idle_tail = true"));
+        assert_eq!(Config::parse(&m.to_toml()).unwrap(), m);
     }
 
     #[test]
@@ -716,6 +739,16 @@ variant = "e_slotssm"
         )
         .unwrap();
         assert_eq!(c.model.state_relative_cm, [2.0, 8.5]);
+        let c = Config::load_with(&p, &sets(&["model.obs=state", "model.state_fingers=false"]))
+            .unwrap();
+        assert!(!c.model.state_fingers);
+        assert!(c.to_toml().contains("state_fingers = false"));
+        let e = Config::load_with(&p, &sets(&["model.state_fingers=false"])).unwrap_err();
+        assert!(
+            e.to_string()
+                .contains("model.state_fingers: only state mode"),
+            "{e}"
+        );
         let e = Config::load_with(&p, &sets(&["model.state_relative_cm=[2]"])).unwrap_err();
         assert!(e.to_string().contains("only state mode"), "{e}");
         let e = Config::load_with(

@@ -166,6 +166,7 @@ impl RunData {
             images: !model.observation.is_state(),
             augment: cfg.data.augment.then(data::Augment::default),
             seed: cfg.train.seed,
+            mask_idle_tail: cfg.data.mask_idle_tail,
         };
         let train = WindowDataset::from_opened(data, Split::Train, win.clone())?;
         if train.is_empty() {
@@ -414,8 +415,13 @@ impl EpisodeSampler {
 /// episode, the most objects in one scene, and the standardisation of the token features over
 /// every 4th frame of the training episodes. Every episode must have been recorded with object
 /// poses (episode schema 2); the first that was not is named in the error. `relative_cm`: the
-/// scales of the squashed object − gripper features (`[model].state_relative_cm`).
-pub fn state_spec(data: &OpenedDataset, relative_cm: &[f32]) -> Result<StateSpec> {
+/// scales of the squashed object − gripper features (`[model].state_relative_cm`); `fingers`:
+/// whether the robot token carries the finger joints (`[model].state_fingers`).
+pub fn state_spec(data: &OpenedDataset, relative_cm: &[f32], fingers: bool) -> Result<StateSpec> {
+    let new_stats = || {
+        let s = StateStats::new(relative_cm);
+        if fingers { s } else { s.without_fingers() }
+    };
     use rayon::prelude::*;
     let stats = data
         .episodes()
@@ -429,7 +435,7 @@ pub fn state_spec(data: &OpenedDataset, relative_cm: &[f32]) -> Result<StateSpec
                     path.display()
                 ))
             };
-            let mut stats = StateStats::new(relative_cm);
+            let mut stats = new_stats();
             for (t, s) in steps.iter().enumerate() {
                 if s.objects.is_empty() || s.objects.iter().any(|o| o.pose.is_none()) {
                     return Err(missing());
@@ -447,7 +453,7 @@ pub fn state_spec(data: &OpenedDataset, relative_cm: &[f32]) -> Result<StateSpec
         // In index order, so the error names the first bad episode whatever the threads did.
         .into_iter()
         .collect::<Result<Vec<_>>>()?;
-    let mut all = StateStats::new(relative_cm);
+    let mut all = new_stats();
     for s in &stats {
         all.merge(s);
     }

@@ -246,7 +246,11 @@ pub fn train(cfg: &Config, opts: &TrainOptions) -> Result<TrainSummary> {
     let state = match cfg.model.obs {
         ObsMode::Pixels => None,
         ObsMode::State => {
-            let spec = crate::dataset::state_spec(&opened, &cfg.model.state_relative_cm)?;
+            let spec = crate::dataset::state_spec(
+                &opened,
+                &cfg.model.state_relative_cm,
+                cfg.model.state_fingers,
+            )?;
             mcfg = mcfg.with_state(spec.tokens(), spec.num_categories(), spec.features());
             mcfg.validate()
                 .map_err(|e| config_error(&cfg, e.to_string()))?;

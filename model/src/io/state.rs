@@ -9,7 +9,8 @@
 //!   two columns of its rotation matrix (the continuous 6-D rotation representation: where an
 //!   object's rim or handle lies is linear in them, and not in a quaternion), grasped (0/1), 0, 0;
 //! - robot: gripper position ×10, three zeros, the first two columns of the gripper's rotation
-//!   matrix, 0, then the two finger joint positions ×10;
+//!   matrix, 0, then the two finger joint positions ×10 (zeros when the spec leaves the fingers
+//!   out, [`StateSpec::fingers`]);
 //! - padding: zeros;
 //! - then, when the spec asks for relative scales s_1…s_m (cm), 3·m more numbers per token:
 //!   tanh((object position − gripper position) / s_j) per axis for objects, zeros for the robot
@@ -61,10 +62,23 @@ pub struct StateSpec {
     /// Scales (cm) of the squashed object − gripper features (none: [`FEATURES`] per token).
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub relative_cm: Vec<f32>,
+    /// Whether the robot token carries the finger joint positions (false: zeros there). The
+    /// fingers tell the gripper command of every frame but the one that starts a close, so a
+    /// policy can learn to copy them and then never starts a close on its own.
+    #[serde(default = "yes", skip_serializing_if = "is_yes")]
+    pub fingers: bool,
     /// Mean and standard deviation of each feature of object tokens.
     pub object_norm: [Vec<f32>; 2],
     /// Mean and standard deviation of each feature of the robot token.
     pub robot_norm: [Vec<f32>; 2],
+}
+
+fn yes() -> bool {
+    true
+}
+
+fn is_yes(v: &bool) -> bool {
+    *v
 }
 
 /// Running sums for the standardisation of [`StateSpec`], over frames of the training data.
@@ -73,6 +87,7 @@ pub struct StateStats {
     names: Vec<String>,
     max_objects: usize,
     relative_cm: Vec<f32>,
+    fingers: bool,
     /// Count, sum and sum of squares per feature.
     objects: [Vec<f64>; 3],
     robot: [Vec<f64>; 3],
@@ -109,9 +124,17 @@ impl StateStats {
             names: Vec::new(),
             max_objects: 0,
             relative_cm: relative_cm.to_vec(),
+            fingers: true,
             objects: zeros(),
             robot: zeros(),
         }
+    }
+
+    /// The same statistics for tokens whose robot token leaves out the finger joint positions
+    /// ([`StateSpec::fingers`] false).
+    pub fn without_fingers(mut self) -> Self {
+        self.fingers = false;
+        self
     }
 
     /// Adds one frame: the objects in scene order (with poses) and the robot's proprio state.
@@ -125,6 +148,7 @@ impl StateStats {
         let order: Vec<usize> = (0..objects.len()).collect();
         let spec = StateSpec {
             relative_cm: self.relative_cm.clone(),
+            fingers: self.fingers,
             ..StateSpec::from_names(objects.iter().map(|o| o.name.as_str()), objects.len())
         };
         let t = raw_tokens(&spec, objects, state, "0", &order)?;
@@ -153,6 +177,10 @@ impl StateStats {
         assert_eq!(
             self.relative_cm, other.relative_cm,
             "statistics of tokens with different relative scales"
+        );
+        assert_eq!(
+            self.fingers, other.fingers,
+            "statistics of tokens with and without fingers"
         );
         for n in &other.names {
             if !self.names.contains(n) {
@@ -187,6 +215,7 @@ impl StateStats {
         };
         StateSpec {
             relative_cm: self.relative_cm.clone(),
+            fingers: self.fingers,
             object_norm: norm(&self.objects),
             robot_norm: norm(&self.robot),
             ..StateSpec::from_names(self.names.iter().map(String::as_str), self.max_objects)
@@ -205,6 +234,7 @@ impl StateSpec {
             categories,
             max_objects,
             relative_cm: Vec::new(),
+            fingers: true,
             object_norm: [vec![0.0; FEATURES], vec![1.0; FEATURES]],
             robot_norm: [vec![0.0; FEATURES], vec![1.0; FEATURES]],
         }
@@ -416,8 +446,10 @@ fn raw_tokens(
     r[6..12].copy_from_slice(&rotation_columns(axis_angle_matrix([
         state[3], state[4], state[5],
     ])));
-    r[13] = state[6] * SCALE;
-    r[14] = state[7] * SCALE;
+    if spec.fingers {
+        r[13] = state[6] * SCALE;
+        r[14] = state[7] * SCALE;
+    }
     categories[n - 1] = ROBOT;
     labels[n - 1] = robot_label.to_string();
     Ok(StateTokens {
@@ -593,6 +625,46 @@ mod tests {
         };
         let e = bad.validate().unwrap_err().to_string();
         assert!(e.contains("expected 18 means"), "{e}");
+    }
+
+    #[test]
+    fn fingers_can_be_left_out_of_the_robot_token() {
+        let state = [0.1, 0.1, 1.0, 0.0, 0.0, 0.0, 0.02, -0.03];
+        let objects = [obj("bowl_1", 0.12, "0")];
+        let (mut with, mut without) = (
+            StateStats::default(),
+            StateStats::default().without_fingers(),
+        );
+        with.add(&objects, &state).unwrap();
+        without.add(&objects, &state).unwrap();
+        let (a, b) = (with.finish(), without.finish());
+        assert!(a.fingers && !b.fingers);
+        // Finger x 10: 0.2 and −0.3 with them, zeros (only centred) without.
+        assert!((a.robot_norm[0][13] - 0.2).abs() < 1e-6);
+        assert!((a.robot_norm[0][14] + 0.3).abs() < 1e-6);
+        assert_eq!((b.robot_norm[0][13], b.robot_norm[0][14]), (0.0, 0.0));
+        let (ta, tb) = (
+            tokens(&a, &objects, &state, "0", &[0]).unwrap(),
+            tokens(&b, &objects, &state, "0", &[0]).unwrap(),
+        );
+        let mut other = state;
+        other[6] = 0.0;
+        other[7] = 0.0;
+        assert_eq!(
+            tokens(&b, &objects, &other, "0", &[0]).unwrap(),
+            tb,
+            "without fingers, the finger joints change nothing"
+        );
+        assert_ne!(tokens(&a, &objects, &other, "0", &[0]).unwrap(), ta);
+        // Everything else is the same; specs saved before the option read as with fingers.
+        assert_eq!(
+            ta.features[..2 * FEATURES - 2],
+            tb.features[..2 * FEATURES - 2]
+        );
+        let json = serde_json::to_value(&a).unwrap();
+        assert!(json.get("fingers").is_none(), "not written when true");
+        assert_eq!(serde_json::to_value(&b).unwrap()["fingers"], false);
+        assert_eq!(serde_json::from_value::<StateSpec>(json).unwrap(), a);
     }
 
     #[test]
