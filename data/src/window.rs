@@ -6,8 +6,8 @@
 //! of a window is decoded once.
 
 use std::path::{Path, PathBuf};
+use std::sync::Arc;
 use std::sync::atomic::{AtomicU64, Ordering};
-use std::sync::{Arc, OnceLock};
 
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -222,8 +222,9 @@ pub struct WindowDataset {
     cfg: WindowConfig,
     norm: ActionNorm,
     epoch: AtomicU64,
-    /// Per episode of the split, the first step of its idle tail (read once, when first needed).
-    tails: Vec<OnceLock<usize>>,
+    /// Per episode of the split, the first step of its idle tail (read when the dataset opens;
+    /// empty unless [`WindowConfig::mask_idle_tail`]).
+    tails: Vec<usize>,
 }
 
 fn mix(mut z: u64) -> u64 {
@@ -339,7 +340,18 @@ impl WindowDataset {
             .enumerate()
             .flat_map(|(k, (_, r))| (0..r.len() as u32).map(move |t| (k as u32, t)))
             .collect();
-        let tails = readers.iter().map(|_| OnceLock::new()).collect();
+        let tails = if cfg.mask_idle_tail {
+            readers
+                .par_iter()
+                .map(|(_, r)| -> Result<usize> {
+                    let steps = r.read_raw_steps(0..r.len())?;
+                    let actions: Vec<[f32; 7]> = steps.iter().map(|s| s.action).collect();
+                    Ok(idle_tail_start(&actions))
+                })
+                .collect::<Result<Vec<_>>>()?
+        } else {
+            Vec::new()
+        };
         Ok(WindowDataset {
             readers,
             samples,
@@ -404,19 +416,10 @@ impl WindowDataset {
         self.readers[k].1.len()
     }
 
-    /// First step of the idle tail of episode `k` of the split ([`idle_tail_start`]), read from
-    /// its file once.
-    pub fn idle_tail(&self, k: usize) -> Result<usize> {
-        if let Some(&s) = self.tails[k].get() {
-            return Ok(s);
-        }
-        let r = &self.readers[k].1;
-        let actions: Vec<[f32; 7]> = r
-            .read_raw_steps(0..r.len())?
-            .iter()
-            .map(|s| s.action)
-            .collect();
-        Ok(*self.tails[k].get_or_init(|| idle_tail_start(&actions)))
+    /// First step of the idle tail of episode `k` of the split ([`idle_tail_start`]); None
+    /// unless the dataset masks idle tails ([`WindowConfig::mask_idle_tail`]).
+    pub fn idle_tail(&self, k: usize) -> Option<usize> {
+        self.tails.get(k).copied()
     }
 
     /// A chunk of episode `k` of the split (position in the split, not the index): the T =
@@ -491,11 +494,7 @@ impl WindowDataset {
         };
         let images = if c.images { frames(false)? } else { Vec::new() };
         let wrist_images = if c.wrist { Some(frames(true)?) } else { None };
-        let end = if c.mask_idle_tail {
-            self.idle_tail(k)?
-        } else {
-            n
-        };
+        let end = self.idle_tail(k).unwrap_or(n);
         let mut actions = Vec::with_capacity(tl * c.chunk * 7);
         let mut action_mask = Vec::with_capacity(tl * c.chunk);
         let mut states = Vec::with_capacity(tl * 8);

@@ -392,8 +392,9 @@ fn masked_idle_tail_leaves_the_frames_but_drops_their_actions() {
     let ep0 = (0..2)
         .find(|&k| masked.chunk(k, 0, 0).unwrap().episode == 0)
         .unwrap();
-    assert_eq!(masked.idle_tail(ep0).unwrap(), 8);
-    assert_eq!(masked.idle_tail(1 - ep0).unwrap(), 12);
+    assert_eq!(masked.idle_tail(ep0), Some(8));
+    assert_eq!(masked.idle_tail(1 - ep0), Some(12));
+    assert_eq!(plain.idle_tail(ep0), None, "not read unless masked");
     // The chunk of steps 6..10: frames 6, 7, 8, 9 with actions (f, f+1).
     let (p, m) = (
         plain.chunk(ep0, 6, 0).unwrap(),
