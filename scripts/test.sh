@@ -8,13 +8,16 @@ bash scripts/setup.sh
 # tasks build, load init state 0, step and render): installed through the dev build the tests use.
 cargo run -q -p sim -- assets install libero
 export LIBERO_PACK_REQUIRED=1
-# The reference MCAP reader (PyPI `mcap`) checks that our episode files open in other tools.
+# The reference MCAP reader (PyPI `mcap`) checks that our episode files open in other tools;
+# `websockets` and `msgpack` run the Python policy server that eval's remote-policy test talks to.
 venv=target/mcap-venv
-if ! "$venv/bin/python" -c "import mcap, mcap_protobuf, zstandard" 2>/dev/null; then
+if ! "$venv/bin/python" -c "import mcap, mcap_protobuf, zstandard, websockets, msgpack" 2>/dev/null; then
   python3 -m venv "$venv"
-  "$venv/bin/pip" install -q "mcap==1.6.0" "mcap-protobuf-support==0.6.0" "zstandard==0.25.0"
+  "$venv/bin/pip" install -q "mcap==1.6.0" "mcap-protobuf-support==0.6.0" "zstandard==0.25.0" \
+    "websockets==13.1" "msgpack==1.1.0"
 fi
 export DATA_MCAP_PYTHON="$PWD/$venv/bin/python"
+export EVAL_WS_PYTHON="$PWD/$venv/bin/python" EVAL_WS_REQUIRED=1
 log=$(mktemp)
 trap 'rm -f "$log"' EXIT
 status=0

@@ -44,6 +44,10 @@ pub enum EvalError {
     /// Writing an output file failed.
     #[error(transparent)]
     Data(#[from] data::DataError),
+    /// A remote policy failed: connection, timeout, or a malformed reply (names the server, the
+    /// episode and the step).
+    #[error("{0}")]
+    Remote(String),
     /// Writing a rollout recording or a visualisation failed.
     #[error("{}: {message}", path.display())]
     Output {

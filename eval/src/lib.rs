@@ -22,6 +22,7 @@
 pub mod error;
 pub mod experiment;
 pub mod policy;
+pub mod remote;
 pub mod report;
 pub mod run;
 pub mod viz;
@@ -70,6 +71,59 @@ pub struct EvalConfig {
     /// Run only this shard's episodes of every task (k mod N = I); [`report::merge`] joins the
     /// shards' results into the unsharded run's.
     pub shard: data::shard::Shard,
+    /// Keep every finished episode in this journal (JSON lines) and skip the episodes it already
+    /// holds when the evaluation runs again (after a crash, a kill or a lost policy server); its
+    /// first line names the evaluation (`journal_key`): a journal of another evaluation is
+    /// started afresh.
+    pub journal: Option<PathBuf>,
+    /// What the journal's episodes were evaluated with (policy, run, checkpoint, execution, …).
+    pub journal_key: String,
+}
+
+/// Format line of an evaluation journal ([`EvalConfig::journal`]).
+pub const JOURNAL_FORMAT: &str = "libero-mem-rs/eval-journal/1";
+
+/// Opens `path` as the journal of the evaluation `key` (seed, budget and protocol settings of
+/// `cfg` included): the episodes it holds (a torn last line is dropped), rewritten so that the
+/// file is whole, and the file to append to. A journal of another evaluation is replaced.
+fn open_journal(path: &Path, key: &str) -> Result<(Vec<EpisodeResult>, std::fs::File), EvalError> {
+    let header = serde_json::json!({"format": JOURNAL_FORMAT, "evaluation": key}).to_string();
+    let mut kept = Vec::new();
+    if let Ok(text) = std::fs::read_to_string(path) {
+        let mut lines = text.lines();
+        if lines.next() == Some(header.as_str()) {
+            for line in lines {
+                match serde_json::from_str::<EpisodeResult>(line) {
+                    Ok(e) => kept.push(e),
+                    Err(_) => break,
+                }
+            }
+            if !kept.is_empty() {
+                eprintln!(
+                    "{}: resuming, {} episodes already evaluated",
+                    path.display(),
+                    kept.len()
+                );
+            }
+        } else {
+            eprintln!(
+                "{}: a journal of another evaluation; starting afresh",
+                path.display()
+            );
+        }
+    }
+    let mut body = header;
+    body.push('\n');
+    for e in &kept {
+        body.push_str(&serde_json::to_string(e).expect("episode results serialise"));
+        body.push('\n');
+    }
+    write_atomic(path, body.as_bytes())?;
+    let file = std::fs::OpenOptions::new()
+        .append(true)
+        .open(path)
+        .map_err(|e| data::DataError::io(path, e))?;
+    Ok((kept, file))
 }
 
 /// Whether episodes of `task` follow LIBERO's protocol (init state k, idle steps): asked for with
@@ -99,6 +153,8 @@ impl Default for EvalConfig {
             libero_init: false,
             assets: sim::pack::AssetPack::Builtin,
             shard: data::shard::Shard::WHOLE,
+            journal: None,
+            journal_key: String::new(),
         }
     }
 }
@@ -297,6 +353,24 @@ pub fn evaluate(
         )));
     }
     let total = tasks.len() * items.len();
+    let key = format!(
+        "{} | seed {} | {} episodes | full budget {} | libero init {} | assets {:?} | image {} | shard {}",
+        cfg.journal_key,
+        cfg.seed,
+        cfg.episodes,
+        cfg.full_budget,
+        cfg.libero_init,
+        cfg.assets,
+        cfg.image_size,
+        cfg.shard
+    );
+    let (journaled, journal) = match &cfg.journal {
+        Some(p) => {
+            let (kept, file) = open_journal(p, &key)?;
+            (kept, Some(Mutex::new(file)))
+        }
+        None => (Vec::new(), None),
+    };
     let done = AtomicUsize::new(0);
     let mut rows = Vec::new();
     let mut all = Vec::new();
@@ -311,14 +385,30 @@ pub fn evaluate(
         } else {
             None
         };
-        let results = Mutex::new(Vec::new());
+        // Episodes of this task the journal holds already (same seed: same episode).
+        let earlier: Vec<EpisodeResult> = journaled
+            .iter()
+            .filter(|e| {
+                e.task == task.id
+                    && items.contains(&e.episode)
+                    && e.seed == episode_seed(cfg.seed, e.episode as u64)
+            })
+            .cloned()
+            .collect();
+        let todo: Vec<usize> = items
+            .iter()
+            .copied()
+            .filter(|k| !earlier.iter().any(|e| e.episode == *k))
+            .collect();
+        done.fetch_add(earlier.len(), Ordering::SeqCst);
+        let results = Mutex::new(earlier);
         let init = || -> Result<_, EvalError> {
             let policy = make()?;
             let env = env_for(task, policy.as_ref(), cfg)?;
             Ok((policy, env))
         };
         let work = |(policy, env): &mut (Box<dyn Policy>, Env), i: usize| {
-            let k = items[i];
+            let k = todo[i];
             let outputs = RolloutOutputs {
                 record: cfg.record.as_ref().map(|d| {
                     d.join(task_slug(&task.id))
@@ -337,6 +427,14 @@ pub fn evaluate(
                 init_states.as_ref(),
             )?;
             let mut guard = results.lock().unwrap_or_else(|p| p.into_inner());
+            if let (Some(j), Some(path)) = (&journal, &cfg.journal) {
+                use std::io::Write;
+                let mut f = j.lock().unwrap_or_else(|p| p.into_inner());
+                let line = serde_json::to_string(&r).expect("episode results serialise") + "\n";
+                f.write_all(line.as_bytes())
+                    .and_then(|_| f.flush())
+                    .map_err(|e| data::DataError::io(path, e))?;
+            }
             guard.push(r);
             let n = guard.len();
             progress(&Progress {
@@ -348,9 +446,11 @@ pub fn evaluate(
             });
             Ok(())
         };
-        data::pool::for_each(items.len(), cfg.workers, init, work, || {
-            EvalError::Argument("an evaluation worker panicked".into())
-        })?;
+        if !todo.is_empty() {
+            data::pool::for_each(todo.len(), cfg.workers, init, work, || {
+                EvalError::Argument("an evaluation worker panicked".into())
+            })?;
+        }
         let mut eps = results.into_inner().unwrap_or_else(|p| p.into_inner());
         eps.sort_by_key(|e| e.episode);
         rows.push(summarize(&task.id, &eps));

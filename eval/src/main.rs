@@ -20,6 +20,23 @@ enum PolicyKind {
     Zero,
 }
 
+/// `--policy`: a kind, or a policy server's `ws://` URL.
+#[derive(Clone, PartialEq, Eq)]
+enum PolicyArg {
+    Kind(PolicyKind),
+    Remote(String),
+}
+
+fn parse_policy(s: &str) -> Result<PolicyArg, String> {
+    if s.contains("://") {
+        eval::remote::parse_url(s).map_err(|e| e.to_string())?;
+        return Ok(PolicyArg::Remote(s.to_string()));
+    }
+    PolicyKind::from_str(s, false)
+        .map(PolicyArg::Kind)
+        .map_err(|_| format!("`{s}`: expected model, expert, random, zero or ws://HOST:PORT"))
+}
+
 impl PolicyKind {
     fn name(self) -> &'static str {
         match self {
@@ -83,6 +100,22 @@ enum Command {
         #[arg(long)]
         out: PathBuf,
     },
+    /// Serve a training run over openpi's websocket protocol (any openpi client, or `eval
+    /// --policy ws://HOST:PORT`, can query it); one streaming policy per connection.
+    Serve {
+        /// Training run directory (`runs/<name>`).
+        #[arg(long)]
+        run: PathBuf,
+        /// Address to listen on.
+        #[arg(long, default_value = "127.0.0.1")]
+        host: String,
+        /// Port (0: any free port, printed).
+        #[arg(long, default_value_t = 8000)]
+        port: u16,
+        /// Stop after this many connections have ended [default: serve until killed].
+        #[arg(long)]
+        connections: Option<usize>,
+    },
     /// Temporal scaling: evaluate the repetition family at several repetition counts N.
     Scaling {
         /// Repetition counts (N unseen in training allowed), e.g. `3,5,7,9,12`.
@@ -98,9 +131,22 @@ struct EvalArgs {
     /// Training run directory to evaluate (`runs/<name>`: config, model, checkpoints).
     #[arg(long)]
     run: Option<PathBuf>,
-    /// Policy: `model` (default with --run) or a sanity policy without a checkpoint.
-    #[arg(long, value_enum)]
-    policy: Option<PolicyKind>,
+    /// Policy: `model` (default with --run), a sanity policy without a checkpoint (`expert`,
+    /// `random`, `zero`), or a policy server speaking openpi's websocket protocol
+    /// (`ws://HOST:PORT`: openpi's `serve_policy.py`, `eval serve`), one connection per worker.
+    #[arg(long, value_parser = parse_policy)]
+    policy: Option<PolicyArg>,
+    /// With a `ws://` policy: actions of each returned chunk executed before the next request
+    /// (openpi's `replan_steps`).
+    #[arg(long, default_value_t = 5, value_parser = clap::value_parser!(u64).range(1..))]
+    replan_steps: u64,
+    /// With a `ws://` policy: send the pending subgoal's text (`libero_mem/subgoal`) with every
+    /// request (the oracle subgoal).
+    #[arg(long)]
+    send_subgoal: bool,
+    /// With a `ws://` policy: seconds to wait for the connection and for each reply.
+    #[arg(long, default_value_t = 60, value_parser = clap::value_parser!(u64).range(1..))]
+    remote_timeout: u64,
     /// Tasks: comma-separated ids (`t1,t3,libero_goal/turn_on_the_stove`,
     /// `libero_90/<file_stem>`) or suites `libero_mem`, `libero_goal`, `all` (the 20 shipped), and,
     /// with the LIBERO pack, `libero_spatial`, `libero_object`, `libero_10`, `libero_90`
@@ -122,9 +168,10 @@ struct EvalArgs {
     /// Worker threads (one simulator and one policy each).
     #[arg(long, default_value_t = 1)]
     workers: usize,
-    /// Camera image side rendered for the model (as recorded by `sim generate`).
-    #[arg(long, default_value_t = 128)]
-    image_size: usize,
+    /// Camera image side rendered for the model (as recorded by `sim generate`) [default: 128;
+    /// 256 with a `ws://` policy, the side openpi's LIBERO example renders before resizing to 224].
+    #[arg(long)]
+    image_size: Option<usize>,
     /// Rendering quality: `fast` (the dataset default) or `libero` (MuJoCo's defaults as robosuite
     /// renders: LIBERO's look, for policies trained on LIBERO's images).
     #[arg(long, default_value = "fast", value_parser = ["fast", "libero", "high"])]
@@ -169,6 +216,12 @@ fn main() -> ExitCode {
     let result = match cli.command {
         Some(Command::Compare { runs, out }) => compare(&runs, out),
         Some(Command::Merge { parts, out }) => merge(&parts, &out),
+        Some(Command::Serve {
+            run,
+            host,
+            port,
+            connections,
+        }) => serve(&run, &host, port, connections),
         Some(Command::Scaling { repeats, eval }) => scaling(&eval, &repeats),
         Some(Command::Experiment {
             file,
@@ -187,6 +240,7 @@ fn main() -> ExitCode {
 /// The resolved policy choice, with the run it loads.
 struct Setup {
     kind: PolicyKind,
+    remote: Option<eval::remote::RemoteConfig>,
     run: Option<RunDir>,
     device: burn::prelude::Device,
     tasks: String,
@@ -195,8 +249,26 @@ struct Setup {
 }
 
 fn setup(args: &EvalArgs) -> anyhow::Result<Setup> {
-    let kind = match (args.policy, &args.run) {
-        (Some(k), _) => k,
+    let remote = match &args.policy {
+        Some(PolicyArg::Remote(url)) => {
+            if args.run.is_some() {
+                return Err(EvalError::Argument(
+                    "give either --run or a ws:// --policy, not both".into(),
+                )
+                .into());
+            }
+            Some(eval::remote::RemoteConfig {
+                url: url.clone(),
+                replan_steps: args.replan_steps as usize,
+                send_subgoal: args.send_subgoal,
+                timeout: std::time::Duration::from_secs(args.remote_timeout),
+            })
+        }
+        _ => None,
+    };
+    let kind = match (&args.policy, &args.run) {
+        (Some(PolicyArg::Kind(k)), _) => *k,
+        (Some(PolicyArg::Remote(_)), _) => PolicyKind::Zero,
         (None, Some(_)) => PolicyKind::Model,
         (None, None) => {
             return Err(EvalError::Argument(
@@ -234,6 +306,7 @@ fn setup(args: &EvalArgs) -> anyhow::Result<Setup> {
     };
     Ok(Setup {
         kind,
+        remote,
         run,
         device,
         tasks,
@@ -243,6 +316,9 @@ fn setup(args: &EvalArgs) -> anyhow::Result<Setup> {
 }
 
 fn make_policy(s: &Setup) -> Result<Box<dyn Policy>, EvalError> {
+    if let Some(r) = &s.remote {
+        return Ok(Box::new(eval::remote::RemotePolicy::connect(r.clone())?));
+    }
     Ok(match s.kind {
         PolicyKind::Model => Box::new(
             eval::run::policy(
@@ -269,7 +345,11 @@ fn run_tasks(
         episodes: args.episodes,
         seed: args.seed,
         full_budget: args.full_budget,
-        image_size: args.image_size,
+        image_size: args.image_size.unwrap_or(if s.remote.is_some() {
+            eval::remote::OPENPI_RENDER_SIZE
+        } else {
+            128
+        }),
         quality: if args.quality == "fast" {
             sim::render::RenderQuality::default()
         } else {
@@ -282,6 +362,16 @@ fn run_tasks(
         libero_init: args.libero_init,
         assets: args.assets.parse().map_err(EvalError::Argument)?,
         shard: args.shard.unwrap_or_default(),
+        journal: Some(journal_path(&s.out)),
+        journal_key: format!(
+            "policy {} | run {:?} | checkpoint {:?} | execute {} | remote {:?} | quality {}",
+            s.policy_name(),
+            s.run.as_ref().map(|r| r.dir.display().to_string()),
+            s.run.as_ref().map(|r| r.step),
+            s.execute,
+            s.remote.as_ref().map(|r| (r.replan_steps, r.send_subgoal)),
+            args.quality
+        ),
     };
     let total = (tasks.len() * cfg.shard.items(cfg.episodes).len()) as u64;
     let bar = if args.quiet {
@@ -307,7 +397,7 @@ fn run_tasks(
     };
     let mut results = eval::evaluate(tasks, &make, &cfg, &progress)?;
     bar.finish_and_clear();
-    results.policy = s.kind.name().to_string();
+    results.policy = s.policy_name();
     results.run = s.run.as_ref().map(|r| r.dir.display().to_string());
     results.checkpoint_step = s.run.as_ref().map(|r| r.step);
     if s.kind == PolicyKind::Model && s.execute != eval::policy::Execution::First {
@@ -316,19 +406,40 @@ fn run_tasks(
     Ok(results)
 }
 
+impl Setup {
+    /// The policy's name in tables: its kind, or the server's URL.
+    fn policy_name(&self) -> String {
+        match &self.remote {
+            Some(r) => r.url.clone(),
+            None => self.kind.name().to_string(),
+        }
+    }
+}
+
 fn header(s: &Setup, args: &EvalArgs) -> String {
     let run = s
         .run
         .as_ref()
         .map(|r| (r.dir.display().to_string(), r.step));
     report::header(
-        s.kind.name(),
+        &s.policy_name(),
         run.as_ref().map(|(d, step)| (d.as_str(), *step)),
         args.seed,
         args.episodes,
         args.full_budget,
         args.shard.unwrap_or_default(),
     )
+}
+
+/// The journal of the episodes finished so far (kept until the tables are written, so that a
+/// killed evaluation resumes).
+fn journal_path(out: &std::path::Path) -> PathBuf {
+    out.join("episodes.jsonl")
+}
+
+/// Removes the journal once the results it fed are written.
+fn drop_journal(out: &std::path::Path) {
+    let _ = std::fs::remove_file(journal_path(out));
 }
 
 /// Writes results.md, results.json and results.csv of `results` into `out`.
@@ -353,12 +464,36 @@ fn evaluate(args: &EvalArgs) -> anyhow::Result<()> {
     let results = run_tasks(args, &s, &tasks, viz.clone())?;
     data::out!("{}", results.markdown());
     write_results(&s.out, &results)?;
+    drop_journal(&s.out);
     if let Some(v) = viz {
         eprintln!("slot overlays in {}", v.display());
     }
     if let Some(r) = &args.record {
         eprintln!("rollouts recorded under {}", r.display());
     }
+    Ok(())
+}
+
+fn serve(
+    run: &std::path::Path,
+    host: &str,
+    port: u16,
+    connections: Option<usize>,
+) -> anyhow::Result<()> {
+    let rd = eval::run::open(run)?;
+    let device = eval::run::device(&rd)?;
+    // Loaded once up front, so a run that cannot serve fails here (exit 2), not per connection.
+    eval::run::policy(&rd, &device)?;
+    let listener = std::net::TcpListener::bind((host, port))
+        .map_err(|e| EvalError::Argument(format!("cannot listen on {host}:{port}: {e}")))?;
+    let addr = listener.local_addr()?;
+    eprintln!("serving {} on ws://{addr}", rd.dir.display());
+    let info = eval::remote::server::ServerInfo {
+        run: rd.dir.display().to_string(),
+        step: rd.step,
+    };
+    let make = || eval::run::policy(&rd, &device);
+    eval::remote::server::serve(listener, &make, &info, connections, &|m| eprintln!("{m}"))?;
     Ok(())
 }
 
@@ -388,6 +523,7 @@ fn scaling(args: &EvalArgs, repeats: &[usize]) -> anyhow::Result<()> {
         &s.out.join("scaling.json"),
         serde_json::to_string_pretty(&rows)?.as_bytes(),
     )?;
+    drop_journal(&s.out);
     eprintln!("wrote {}/scaling.{{md,json}}", s.out.display());
     Ok(())
 }

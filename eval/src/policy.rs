@@ -103,6 +103,26 @@ impl Policy for ExpertPolicy {
     }
 }
 
+/// The objects' annotations of every step as the recorder writes them: poses, grasps, boxes (from
+/// the segmentation when rendered) and the oracle labels, which advance after every step (not at
+/// reset). One per episode.
+#[derive(Default)]
+pub struct ObjectReader {
+    labels: Option<LabelTracker>,
+}
+
+impl ObjectReader {
+    /// The annotations of `obs` (call once per step, in order).
+    pub fn read(&mut self, env: &Env, obs: &Observation) -> Vec<ObjectAnnotation> {
+        match self.labels.as_mut() {
+            Some(t) => t.update(env, obs.goal.as_ref()),
+            None => self.labels = LabelTracker::new(env),
+        }
+        let labels = self.labels.as_ref().map_or(&[][..], LabelTracker::labels);
+        sim::record::object_annotations(env, obs, labels)
+    }
+}
+
 /// How the model's predicted action chunks (`[H_a]` actions per step) become executed actions.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub enum Execution {
@@ -196,7 +216,7 @@ pub struct ModelPolicy {
     instruction: String,
     grid: [usize; 2],
     seed: u64,
-    labels: Option<LabelTracker>,
+    objects: ObjectReader,
     execution: Execution,
     recent: std::collections::VecDeque<Vec<Vec<f32>>>,
 }
@@ -223,7 +243,7 @@ impl ModelPolicy {
             instruction: String::new(),
             grid,
             seed: 0,
-            labels: None,
+            objects: ObjectReader::default(),
             execution: Execution::First,
             recent: std::collections::VecDeque::new(),
         })
@@ -233,15 +253,8 @@ impl ModelPolicy {
     /// (call once per step, after [`Policy::reset`]; when the model reads objects it also
     /// advances the oracle labels, as the recorder does).
     pub fn input(&mut self, env: &Env, obs: &Observation) -> Result<model::StepInput, EvalError> {
-        let objects = if self.processor.reads_state() || self.processor.reads_boxes() {
-            // The labels as the recorder writes them: updated after every step (not at reset).
-            match self.labels.as_mut() {
-                Some(t) => t.update(env, obs.goal.as_ref()),
-                None => self.labels = LabelTracker::new(env),
-            }
-            let labels = self.labels.as_ref().map_or(&[][..], LabelTracker::labels);
-            // The recorder's own annotations (boxes from the segmentation when rendered).
-            sim::record::object_annotations(env, obs, labels)
+        let objects = if self.reads_objects() {
+            self.objects.read(env, obs)
         } else {
             Vec::new()
         };
@@ -253,6 +266,43 @@ impl ModelPolicy {
             self.seed,
             self.policy.device(),
         )
+    }
+
+    /// Whether the model reads the objects' annotations (state mode, or boxes for the oracle).
+    pub fn reads_objects(&self) -> bool {
+        self.processor.reads_state() || self.processor.reads_boxes()
+    }
+
+    /// The run's input processor.
+    pub fn processor(&self) -> &model::Processor {
+        &self.processor
+    }
+
+    /// Starts an episode of `instruction` from `seed` without a task (what [`Policy::reset`]
+    /// does; the policy server's reset).
+    pub fn start(&mut self, instruction: &str, seed: u64) {
+        self.policy.reset();
+        self.instruction = instruction.to_string();
+        self.seed = seed;
+        self.objects = ObjectReader::default();
+        self.recent.clear();
+    }
+
+    /// The whole action chunk for one step's observation, each action un-normalised and
+    /// finished as [`Policy::act`] finishes the one it executes (`[H_a]` actions).
+    pub fn act_chunk(&mut self, step: &model::StepObservation) -> Result<Vec<[f32; 7]>, EvalError> {
+        let input = self.processor.step(step, self.policy.device())?;
+        let chunk = self.policy.act_input(input)?;
+        chunk
+            .into_iter()
+            .map(|a| {
+                let a: [f32; 7] = a
+                    .as_slice()
+                    .try_into()
+                    .map_err(|_| EvalError::Model("the model returned no 7-D action".into()))?;
+                Ok(finish_action(self.processor.unnormalize(a)))
+            })
+            .collect()
     }
 
     /// Whether the oracle subgoal is fed to the model.
@@ -312,11 +362,7 @@ pub fn finish_action(a: [f32; 7]) -> [f32; 7] {
 
 impl Policy for ModelPolicy {
     fn reset(&mut self, task: &TaskSpec, seed: u64) -> Result<(), EvalError> {
-        self.policy.reset();
-        self.instruction = task.instruction.clone();
-        self.seed = seed;
-        self.labels = None;
-        self.recent.clear();
+        self.start(&task.instruction, seed);
         Ok(())
     }
 

@@ -375,3 +375,128 @@ fn sharded_expert_evaluation_merges_into_the_unsharded_files() {
     assert_eq!(code, 2, "{err}");
     assert!(err.contains("expected I/N"), "{err}");
 }
+
+#[test]
+fn bad_policy_urls_and_unreachable_servers_are_one_error() {
+    for (policy, want) in [
+        ("ws://localhost", "no port (ws://HOST:PORT)"),
+        ("wss://h:1", "TLS (wss://) is not supported"),
+        (
+            "bogus",
+            "expected model, expert, random, zero or ws://HOST:PORT",
+        ),
+    ] {
+        let (code, _, err) = eval(&["--tasks", "t1", "--policy", policy]);
+        assert_eq!(code, 2, "{policy}: {err}");
+        assert!(err.contains(want), "{policy}: {err}");
+    }
+    let port = std::net::TcpListener::bind("127.0.0.1:0")
+        .unwrap()
+        .local_addr()
+        .unwrap()
+        .port();
+    let url = format!("ws://127.0.0.1:{port}");
+    let dir = std::env::temp_dir().join(format!("eval-cli-ws-{}", std::process::id()));
+    let (code, _, err) = eval(&[
+        "--tasks",
+        "t1",
+        "--episodes",
+        "1",
+        "--policy",
+        &url,
+        "--remote-timeout",
+        "2",
+        "--out",
+        dir.to_str().unwrap(),
+    ]);
+    assert_eq!(code, 1, "{err}");
+    assert!(
+        err.contains(&format!("policy server {url}: cannot connect")),
+        "{err}"
+    );
+    assert!(!dir.join("results.json").exists(), "no results file");
+    let (code, _, err) = eval(&["--tasks", "t1", "--policy", &url, "--run", "runs/x"]);
+    assert_eq!(code, 2, "{err}");
+    assert!(err.contains("either --run or a ws:// --policy"), "{err}");
+}
+
+#[test]
+fn a_killed_evaluation_resumes_from_its_journal() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("out");
+    let args = |out: &Path| {
+        vec![
+            "--tasks".to_string(),
+            "t1,t2".into(),
+            "--episodes".into(),
+            "3".into(),
+            "--seed".into(),
+            "4".into(),
+            "--policy".into(),
+            "random".into(),
+            "--out".into(),
+            out.display().to_string(),
+        ]
+    };
+    let run = |out: &Path| {
+        let a = args(out);
+        eval(&a.iter().map(String::as_str).collect::<Vec<_>>())
+    };
+    // The whole evaluation, once, for reference; its journal is gone once the tables are written.
+    let whole = dir.path().join("whole");
+    let (code, table, err) = run(&whole);
+    assert_eq!(code, 0, "{err}");
+    assert!(!whole.join("episodes.jsonl").exists());
+    let journal = std::fs::read_to_string(
+        // A journal as a killed run leaves it: the header, two episodes and a torn third line.
+        {
+            let (code, _, err) = run(&out);
+            assert_eq!(code, 0, "{err}");
+            out.join("results.json")
+        },
+    )
+    .unwrap();
+    let results: serde_json::Value = serde_json::from_str(&journal).unwrap();
+    let eps = results["episodes"].as_array().unwrap();
+    let header = serde_json::json!({
+        "format": "libero-mem-rs/eval-journal/1",
+        "evaluation": format!(
+            "policy random | run None | checkpoint None | execute first | remote None | quality fast \
+             | seed 4 | 3 episodes | full budget false | libero init false | assets Builtin | image 128 \
+             | shard 0/1"
+        ),
+    });
+    let mut text = format!("{header}\n");
+    for e in &eps[..2] {
+        text.push_str(&format!("{e}\n"));
+    }
+    // A marked copy of episode 0 shows that journaled episodes are not run again.
+    text = text.replacen("\"steps\":200", "\"steps\":199", 1);
+    text.push_str(&eps[2].to_string()[..20]);
+    std::fs::remove_file(out.join("results.json")).unwrap();
+    std::fs::write(out.join("episodes.jsonl"), &text).unwrap();
+    let (code, resumed, err) = run(&out);
+    assert_eq!(code, 0, "{err}");
+    assert!(
+        err.contains("resuming, 2 episodes already evaluated"),
+        "{err}"
+    );
+    let back: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("results.json")).unwrap()).unwrap();
+    assert_eq!(back["episodes"][0]["steps"], 199, "taken from the journal");
+    assert_eq!(
+        back["episodes"].as_array().unwrap()[1..],
+        results["episodes"].as_array().unwrap()[1..]
+    );
+    assert_ne!(resumed, table);
+    assert!(!out.join("episodes.jsonl").exists());
+    // A journal of another evaluation (here another seed) is not used.
+    std::fs::write(out.join("episodes.jsonl"), text.replace("seed 4", "seed 5")).unwrap();
+    let (code, again, err) = run(&out);
+    assert_eq!(code, 0, "{err}");
+    assert!(
+        err.contains("a journal of another evaluation; starting afresh"),
+        "{err}"
+    );
+    assert_eq!(again, table);
+}
