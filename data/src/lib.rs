@@ -50,6 +50,7 @@ pub mod shard;
 pub mod synth;
 pub mod text;
 pub mod tfrecord;
+pub mod video;
 pub mod window;
 
 pub use episode::{EncodedImage, EpisodeReader, EpisodeWriter, RawStep, WriterOptions};

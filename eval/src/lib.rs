@@ -58,6 +58,9 @@ pub struct EvalConfig {
     pub workers: usize,
     /// Record every rollout as an mcap episode under this directory (`<task>/episode_<k>.mcap`).
     pub record: Option<PathBuf>,
+    /// Write every rollout as an mp4 video under this directory (`<task>/episode_<k>.mp4`:
+    /// agentview | eye-in-hand, the step and the pending subgoal under them).
+    pub video: Option<PathBuf>,
     /// Write slot-attention overlays of the first rollout (first task, episode 0) here.
     pub viz: Option<PathBuf>,
     /// Every how many steps a visualisation frame is written.
@@ -148,6 +151,7 @@ impl Default for EvalConfig {
             quality: sim::render::RenderQuality::default(),
             workers: 1,
             record: None,
+            video: None,
             viz: None,
             viz_every: 4,
             libero_init: false,
@@ -188,6 +192,8 @@ pub fn task_slug(id: &str) -> String {
 pub struct RolloutOutputs {
     /// Record the rollout to this mcap file.
     pub record: Option<PathBuf>,
+    /// Write the rollout's video to this mp4 file.
+    pub video: Option<PathBuf>,
     /// Write slot overlays into this folder.
     pub viz: Option<PathBuf>,
     /// Every how many steps an overlay is written.
@@ -239,11 +245,18 @@ pub fn run_episode(
         Some(dir) => Some(viz::Writer::create(dir, out.viz_every.max(1))?),
         None => None,
     };
+    let mut video = out
+        .video
+        .as_ref()
+        .map(|p| viz::Video::new(p, task.max_steps));
     let mut steps = 0;
     while steps < task.max_steps {
         let g = goal(&obs)?;
         if !cfg.full_budget && g.satisfied >= g.goal_len {
             break;
+        }
+        if let Some(v) = video.as_mut() {
+            v.frame(&obs, steps)?;
         }
         let a = policy.act(env, &obs)?;
         if let Some(v) = viz.as_mut() {
@@ -259,6 +272,10 @@ pub fn run_episode(
     }
     if let (Some(rec), Some(path)) = (recorder, out.record.as_ref()) {
         rec.finish().map_err(|e| record_err(path, e))?;
+    }
+    if let Some(mut v) = video {
+        v.frame(&obs, steps)?;
+        v.finish()?;
     }
     let g = goal(&obs)?;
     let success = if cfg.full_budget {
@@ -285,7 +302,7 @@ pub fn env_for(task: &TaskSpec, policy: &dyn Policy, cfg: &EvalConfig) -> Result
     Env::from_task_with_assets(
         task,
         EnvConfig {
-            render: policy.needs_images() || record,
+            render: policy.needs_images() || record || cfg.video.is_some(),
             segmentation: record || policy.needs_segmentation(),
             image_size: cfg.image_size,
             quality: cfg.quality,
@@ -336,7 +353,7 @@ pub fn evaluate(
             "--episodes and --workers must be at least 1".into(),
         ));
     }
-    if let Some(dir) = &cfg.record {
+    for dir in cfg.record.iter().chain(&cfg.video) {
         for task in tasks {
             let d = dir.join(task_slug(&task.id));
             std::fs::create_dir_all(&d).map_err(|e| EvalError::Output {
@@ -413,6 +430,10 @@ pub fn evaluate(
                 record: cfg.record.as_ref().map(|d| {
                     d.join(task_slug(&task.id))
                         .join(format!("episode_{k:06}.mcap"))
+                }),
+                video: cfg.video.as_ref().map(|d| {
+                    d.join(task_slug(&task.id))
+                        .join(format!("episode_{k:06}.mp4"))
                 }),
                 viz: cfg.viz.clone().filter(|_| ti == 0 && k == 0),
                 viz_every: cfg.viz_every,

@@ -182,6 +182,11 @@ struct EvalArgs {
     /// Record every rollout as an mcap episode under this folder.
     #[arg(long)]
     record: Option<PathBuf>,
+    /// Write every rollout as an mp4 under this folder (`<task>/episode_<k>.mp4`: agentview |
+    /// eye-in-hand, step and pending subgoal as captions; H.264) and OUT/index.html linking each
+    /// video with its episode's result row.
+    #[arg(long)]
+    video: Option<PathBuf>,
     /// Write slot-attention overlays of the first rollout to OUT/viz (model policy only).
     #[arg(long)]
     viz: bool,
@@ -357,6 +362,7 @@ fn run_tasks(
         },
         workers: args.workers,
         record: args.record.clone(),
+        video: args.video.clone(),
         viz,
         viz_every: args.viz_every,
         libero_init: args.libero_init,
@@ -431,6 +437,17 @@ fn header(s: &Setup, args: &EvalArgs) -> String {
     )
 }
 
+/// How a page in `from` links the folder `to`: relative when `to` lies under `from`, else the
+/// absolute path.
+fn link(from: &std::path::Path, to: &std::path::Path) -> String {
+    let abs = |p: &std::path::Path| std::fs::canonicalize(p).unwrap_or_else(|_| p.to_path_buf());
+    let (f, t) = (abs(from), abs(to));
+    match t.strip_prefix(&f) {
+        Ok(rel) if !rel.as_os_str().is_empty() => rel.display().to_string(),
+        _ => t.display().to_string(),
+    }
+}
+
 /// The journal of the episodes finished so far (kept until the tables are written, so that a
 /// killed evaluation resumes).
 fn journal_path(out: &std::path::Path) -> PathBuf {
@@ -465,6 +482,14 @@ fn evaluate(args: &EvalArgs) -> anyhow::Result<()> {
     data::out!("{}", results.markdown());
     write_results(&s.out, &results)?;
     drop_journal(&s.out);
+    if let Some(v) = &args.video {
+        let page = s.out.join("index.html");
+        eval::write_atomic(
+            &page,
+            eval::viz::index_html(&results, &link(&s.out, v)).as_bytes(),
+        )?;
+        eprintln!("videos under {}, listed in {}", v.display(), page.display());
+    }
     if let Some(v) = viz {
         eprintln!("slot overlays in {}", v.display());
     }

@@ -150,6 +150,122 @@ impl Writer {
     }
 }
 
+/// One rollout video frame ([`data::video::frame`]) of `obs` at `step` of `budget`.
+pub fn video_frame(
+    obs: &Observation,
+    step: usize,
+    budget: usize,
+) -> Option<(Vec<u8>, usize, usize)> {
+    let g = obs.goal.as_ref();
+    let caption = data::video::Caption {
+        step,
+        budget,
+        progress: g.map(|g| (g.satisfied, g.goal_len, g.failed)),
+        pending: g.and_then(|g| g.pending.clone()),
+    };
+    data::video::frame(
+        &obs.agentview_rgb,
+        &obs.eye_in_hand_rgb,
+        obs.image_size,
+        &caption,
+    )
+}
+
+/// The video of one rollout: a frame per step (the observation the policy acted on) and the
+/// last observation.
+pub struct Video {
+    writer: Option<data::video::VideoWriter>,
+    path: PathBuf,
+    budget: usize,
+}
+
+impl Video {
+    /// A video to be written to `path` for an episode of `budget` steps.
+    pub fn new(path: &Path, budget: usize) -> Self {
+        Video {
+            writer: None,
+            path: path.to_path_buf(),
+            budget,
+        }
+    }
+
+    /// Appends the frame of `obs` at `step`.
+    pub fn frame(&mut self, obs: &Observation, step: usize) -> Result<(), EvalError> {
+        let (rgb, w, h) = video_frame(obs, step, self.budget).ok_or_else(|| EvalError::Output {
+            path: self.path.clone(),
+            message: "the environment renders no camera images".into(),
+        })?;
+        if self.writer.is_none() {
+            self.writer = Some(data::video::VideoWriter::create(&self.path, w, h, 20)?);
+        }
+        self.writer.as_mut().expect("created").push(&rgb)?;
+        Ok(())
+    }
+
+    /// Finishes the file.
+    pub fn finish(self) -> Result<(), EvalError> {
+        if let Some(w) = self.writer {
+            w.finish()?;
+        }
+        Ok(())
+    }
+}
+
+/// Escapes `&`, `<`, `>` and `"` for HTML.
+fn html_escape(s: &str) -> String {
+    s.replace('&', "&amp;")
+        .replace('<', "&lt;")
+        .replace('>', "&gt;")
+        .replace('"', "&quot;")
+}
+
+/// `OUT/index.html` of an evaluation with videos: the results table, then one row per episode
+/// (task, episode, seed, steps, subgoals, success, over-repetition) with its video
+/// (`videos` is the video folder as the page links it: relative to OUT where possible).
+pub fn index_html(results: &crate::Results, videos: &str) -> String {
+    let mut h = String::from(
+        "<!doctype html>\n<html><head><meta charset=\"utf-8\"><title>rollouts</title>\n<style>\
+         body{font-family:sans-serif}table{border-collapse:collapse}td,th{border:1px solid #ccc;\
+         padding:2px 6px}video{width:384px}</style></head><body>\n",
+    );
+    h.push_str(&format!(
+        "<h1>{} — {} episodes per task, seed {}{}</h1>\n<pre>{}</pre>\n<table>\n<tr><th>task</th>\
+         <th>episode</th><th>seed</th><th>steps</th><th>subgoals</th><th>success</th>\
+         <th>over-repetition</th><th>video</th></tr>\n",
+        html_escape(&results.policy),
+        results.episodes_per_task,
+        results.seed,
+        if results.full_budget {
+            ", full budget"
+        } else {
+            ""
+        },
+        html_escape(&crate::report::markdown(&results.tasks)),
+    ));
+    for e in &results.episodes {
+        let src = format!(
+            "{videos}/{}/episode_{:06}.mp4",
+            crate::task_slug(&e.task),
+            e.episode
+        );
+        h.push_str(&format!(
+            "<tr><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}/{}</td><td>{}</td><td>{}</td>\
+             <td><video controls preload=\"none\" src=\"{}\"></video></td></tr>\n",
+            html_escape(&e.task),
+            e.episode,
+            e.seed,
+            e.steps,
+            e.satisfied,
+            e.goal_len,
+            if e.success { "yes" } else { "no" },
+            if e.over_repetition { "yes" } else { "no" },
+            html_escape(&src),
+        ));
+    }
+    h.push_str("</table>\n</body></html>\n");
+    h
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -500,3 +500,64 @@ fn a_killed_evaluation_resumes_from_its_journal() {
     );
     assert_eq!(again, table);
 }
+
+#[test]
+fn videos_of_every_rollout_and_a_page_linking_them() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("out");
+    let videos = out.join("videos");
+    let (code, _, err) = eval(&[
+        "--tasks",
+        "t1",
+        "--episodes",
+        "2",
+        "--seed",
+        "3",
+        "--policy",
+        "expert",
+        "--image-size",
+        "64",
+        "--out",
+        out.to_str().unwrap(),
+        "--video",
+        videos.to_str().unwrap(),
+    ]);
+    assert_eq!(code, 0, "{err}");
+    let results: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("results.json")).unwrap()).unwrap();
+    let page = std::fs::read_to_string(out.join("index.html")).unwrap();
+    for e in results["episodes"].as_array().unwrap() {
+        let k = e["episode"].as_u64().unwrap();
+        let steps = e["steps"].as_u64().unwrap();
+        let rel = format!("videos/libero_mem-t1/episode_{k:06}.mp4");
+        assert!(page.contains(&format!("src=\"{rel}\"")), "{page}");
+        let bytes = std::fs::read(out.join(&rel)).unwrap();
+        let size = bytes.len() as u64;
+        let r = mp4::Mp4Reader::read_header(std::io::Cursor::new(bytes), size).unwrap();
+        // A frame per step the policy acted on, and the last observation; 128×(64 + 24).
+        assert_eq!(r.sample_count(1).unwrap() as u64, steps + 1);
+        let t = &r.tracks()[&1];
+        assert_eq!((t.width(), t.height()), (128, 88));
+        // Playable by Debian's ffmpeg, when it is installed.
+        match Command::new("ffprobe")
+            .args([
+                "-v",
+                "error",
+                "-count_frames",
+                "-show_entries",
+                "stream=codec_name,width,height,nb_read_frames",
+                "-of",
+                "csv=p=0",
+            ])
+            .arg(out.join(&rel))
+            .output()
+        {
+            Ok(o) => {
+                assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+                let line = String::from_utf8_lossy(&o.stdout).trim().to_string();
+                assert_eq!(line, format!("h264,128,88,{}", steps + 1));
+            }
+            Err(_) => eprintln!("ffprobe not installed: mp4 checked with the mp4 crate only"),
+        }
+    }
+}

@@ -103,7 +103,8 @@ fn recorded_poses_track_the_objects_and_the_grasp() {
             0,
             &path,
             Default::default(),
-            &Default::default()
+            &Default::default(),
+            false,
         )
         .unwrap(),
         "the expert solves T1 seed 0"
@@ -179,8 +180,9 @@ fn execution_noise_records_clean_corrections_of_perturbed_moves() {
     };
     let record = |env: &mut Env, name: &str| {
         let path = dir.path().join(name);
-        let ok = sim::generate::record_episode(env, &task, 0, &path, Default::default(), &expert)
-            .unwrap();
+        let ok =
+            sim::generate::record_episode(env, &task, 0, &path, Default::default(), &expert, false)
+                .unwrap();
         assert!(ok, "the perturbed expert solves T1 seed 0");
         path
     };

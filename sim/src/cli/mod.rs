@@ -97,6 +97,10 @@ pub enum Command {
         /// size, expert settings; recorded in its generation.json) instead of refusing.
         #[arg(long)]
         force: bool,
+        /// Also write each recorded episode as an mp4 beside its mcap (`episode_<k>.mp4`:
+        /// agentview | eye-in-hand, the step and the pending subgoal under them; H.264).
+        #[arg(long)]
+        video: bool,
         /// Record only shard I of N (episodes k with k mod N = I; 0 ≤ I < N), e.g. one task of
         /// a Slurm array job. Shards may share --out; once all are done, the same command without
         /// --shard writes the index (it finds every episode and records none).
@@ -287,6 +291,7 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
             plain_expert,
             hold_steps,
             force,
+            video,
             shard,
             branch_rule,
             exec_noise,
@@ -305,6 +310,7 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
                     ..sim::generate::expert_config(plain_expert, hold_steps)
                 },
                 force,
+                video,
                 shard: shard.unwrap_or_default(),
                 ..Default::default()
             },

@@ -129,12 +129,15 @@ impl GenerationRecord {
     }
 }
 
-/// Removes what a killed generation left in `dir`: the recorder's `.episode-*.mcap.tmp` files.
+/// Removes what a killed generation left in `dir`: the recorder's `.episode-*.mcap.tmp` files
+/// and the video writer's `.video-*.mp4.tmp` files.
 pub fn clean_temporaries(dir: &Path) -> Result<(), GenerateError> {
     for e in std::fs::read_dir(dir).map_err(|e| data::DataError::io(dir, e))? {
         let e = e.map_err(|e| data::DataError::io(dir, e))?;
         let name = e.file_name().to_string_lossy().into_owned();
-        if name.starts_with(".episode-") && name.ends_with(".mcap.tmp") {
+        if name.starts_with(".episode-") && name.ends_with(".mcap.tmp")
+            || name.starts_with(".video-") && name.ends_with(".mp4.tmp")
+        {
             std::fs::remove_file(e.path()).map_err(|err| data::DataError::io(e.path(), err))?;
         }
     }
@@ -238,6 +241,9 @@ pub struct GenerateConfig {
     pub force: bool,
     /// Record only this shard's episodes (k mod N = I; see [`generate_episodes`]).
     pub shard: data::shard::Shard,
+    /// Also write each recorded episode as an mp4 beside its mcap ([`video_path`]); not part of
+    /// the dataset's identity (its `generation.json`).
+    pub video: bool,
 }
 
 impl Default for GenerateConfig {
@@ -252,6 +258,7 @@ impl Default for GenerateConfig {
             expert: crate::expert::ExpertConfig::default(),
             force: false,
             shard: data::shard::Shard::WHOLE,
+            video: false,
         }
     }
 }
@@ -307,7 +314,54 @@ pub fn expert_config(plain: bool, hold_steps: Option<usize>) -> crate::expert::E
     }
 }
 
-/// Records one expert episode to `path`; `Ok(false)` (and no file) when the expert fails.
+/// The video of the episode recorded at `path` (`episode_<k>.mp4` beside `episode_<k>.mcap`).
+pub fn video_path(path: &Path) -> PathBuf {
+    path.with_extension("mp4")
+}
+
+/// The video frame of `obs` in an episode of `task`.
+fn video_frame(obs: &crate::Observation, task: &TaskSpec) -> Option<(Vec<u8>, usize, usize)> {
+    let g = obs.goal.as_ref();
+    let caption = data::video::Caption {
+        step: obs.step,
+        budget: task.max_steps,
+        progress: g.map(|g| (g.satisfied, g.goal_len, g.failed)),
+        pending: g.and_then(|g| g.pending.clone()),
+    };
+    data::video::frame(
+        &obs.agentview_rgb,
+        &obs.eye_in_hand_rgb,
+        obs.image_size,
+        &caption,
+    )
+}
+
+/// Appends `obs`'s frame to the episode's video (started at the first frame).
+fn push_frame(
+    video: &mut Option<data::video::VideoWriter>,
+    path: &Path,
+    obs: &crate::Observation,
+    task: &TaskSpec,
+) -> Result<(), GenerateError> {
+    let Some((rgb, w, h)) = video_frame(obs, task) else {
+        return Err(GenerateError::Argument(
+            "video: the environment renders no camera images".into(),
+        ));
+    };
+    if video.is_none() {
+        *video = Some(data::video::VideoWriter::create(
+            video_path(path),
+            w,
+            h,
+            20,
+        )?);
+    }
+    video.as_mut().expect("created").push(&rgb)?;
+    Ok(())
+}
+
+/// Records one expert episode to `path` (and, with `video`, its mp4 to [`video_path`]);
+/// `Ok(false)` (and no file) when the expert fails.
 pub fn record_episode(
     env: &mut Env,
     task: &TaskSpec,
@@ -315,6 +369,7 @@ pub fn record_episode(
     path: &Path,
     writer: data::WriterOptions,
     expert: &crate::expert::ExpertConfig,
+    video: bool,
 ) -> Result<bool, GenerateError> {
     // A start the scene cannot place is the task file's fault: say which task.
     let mut obs = env.reset(seed).map_err(|e| match e {
@@ -327,11 +382,15 @@ pub fn record_episode(
     let expert_hold = expert.hold_steps;
     let mut expert = Expert::with_config(task, seed, expert.clone());
     let mut rec = Recorder::create(path, env, task, seed, writer)?;
+    let mut frames = None;
     let mut after_done = 0;
     for _ in 0..task.max_steps {
         let Some(action) = expert.act(env, &obs) else {
             break;
         };
+        if video {
+            push_frame(&mut frames, path, &obs, task)?;
+        }
         // With execution noise the arm moves by the perturbed action; the label is the clean one.
         let next = env.step(&expert.executed(action))?;
         rec.record(env, &obs, action, &next)?;
@@ -352,6 +411,12 @@ pub fn record_episode(
         .as_ref()
         .expect("task environments report goal progress");
     if g.done && !g.failed {
+        if video {
+            push_frame(&mut frames, path, &obs, task)?;
+            if let Some(v) = frames {
+                v.finish()?;
+            }
+        }
         rec.finish()?;
         Ok(true)
     } else {
@@ -430,7 +495,15 @@ pub fn generate_episodes(
         let env = env.as_mut().expect("just built");
         for attempt in 0..MAX_ATTEMPTS {
             let seed = attempt_seed(cfg.seed, k as u64, attempt);
-            if record_episode(env, task, seed, &path, cfg.writer.clone(), &cfg.expert)? {
+            if record_episode(
+                env,
+                task,
+                seed,
+                &path,
+                cfg.writer.clone(),
+                &cfg.expert,
+                cfg.video,
+            )? {
                 report(&|p| {
                     p.successes += 1;
                     p.done += 1;
