@@ -18,6 +18,9 @@
 # demos' idle tail: the arm standing still after its last move); its runs get `_masktail`.
 # FINGERS=0 (environment) trains with `model.state_fingers = false` (the robot token without the
 # finger joints, so the gripper command cannot be copied from them); its runs get `_nofingers`.
+# QUERIES=step (environment) trains with one decoder query per chunk step
+# (`[model.overrides] decoder = { queries = "step" }`) instead of one per action value; its runs
+# get `_qstep`.
 #
 # DATA is a suite dataset with one folder per task. The default, demos that go on after the goal
 # to release, retreat and stand still for 30 steps (what a policy evaluated over the full budget
@@ -48,6 +51,10 @@ fingers=${FINGERS:-1}
 [[ $fingers == 0 || $fingers == 1 ]] || { echo "error: FINGERS \`$fingers\` is not 0 or 1" >&2; exit 2; }
 [[ $fingers == 1 ]] || suffix="${suffix}_nofingers"
 fingers_set="model.state_fingers=$([[ $fingers == 1 ]] && echo true || echo false)"
+queries=${QUERIES:-value}
+[[ $queries == value || $queries == step ]] || { echo "error: QUERIES \`$queries\` is not value or step" >&2; exit 2; }
+[[ $queries == value ]] || suffix="${suffix}_qstep"
+queries_set="model.overrides.decoder.queries=\"$queries\""
 [[ -d $data ]] || { echo "error: $data is missing (see the header of $0 for the command that records it)" >&2; exit 2; }
 [[ -x target/release/train && -x target/release/eval ]] || { echo "error: build first: cargo build --release -p train -p eval" >&2; exit 2; }
 
@@ -55,13 +62,13 @@ one() {
   # Run by xargs in a fresh bash, which does not inherit the options set above: a failed
   # training or evaluation must fail this task (and, through xargs, the script).
   set -euo pipefail
-  local task=$1 steps=$2 data=$3 suffix=$4 seed=$5 mask_set=$6 fingers_set=$7
+  local task=$1 steps=$2 data=$3 suffix=$4 seed=$5 mask_set=$6 fingers_set=$7 queries_set=$8
   local stem=${task#libero_goal/}
   local run=runs/lg_task_${stem}_${steps}${suffix}
   if [[ ! -f $run/eval/results.json ]]; then
     ./target/release/train configs/state/libero_goal.toml --quiet --steps "$steps" --run-dir "$run" \
       --set "name=\"lg_task_${stem}_${steps}${suffix}\"" --set train.stagger=false --set "train.seed=$seed" \
-      --set "$mask_set" --set "$fingers_set" --set "data.dir=\"$data/libero_goal_${stem}\"" --set "eval.tasks=[\"$task\"]" >"$run.log" 2>&1
+      --set "$mask_set" --set "$fingers_set" --set "$queries_set" --set "data.dir=\"$data/libero_goal_${stem}\"" --set "eval.tasks=[\"$task\"]" >"$run.log" 2>&1
     ./target/release/eval --run "$run" --tasks "$task" --episodes 20 --seed 1000 --full-budget \
       --workers 1 --quiet >>"$run.log" 2>&1
   fi
@@ -84,7 +91,7 @@ for t in $tasks; do
     exit 2
   }
 done
-runs=$(printf '%s\n' $tasks | xargs -P "$jobs" -I{} bash -c 'one "$@"' _ {} "$steps" "$data" "$suffix" "$seed" "$mask_set" "$fingers_set" | sort) || {
+runs=$(printf '%s\n' $tasks | xargs -P "$jobs" -I{} bash -c 'one "$@"' _ {} "$steps" "$data" "$suffix" "$seed" "$mask_set" "$fingers_set" "$queries_set" | sort) || {
   echo "error: a task's training or evaluation failed; see runs/lg_task_*_$steps$suffix.log" >&2
   exit 1
 }
@@ -93,7 +100,8 @@ runs=$(printf '%s\n' $tasks | xargs -P "$jobs" -I{} bash -c 'one "$@"' _ {} "$st
   echo "$seed) on the task's 150 demos of $data; 20 seeds from 1000, full budget:"
   [[ $mask == 0 ]] || echo "No action loss on the demos' idle tail (\`data.mask_idle_tail = true\`)."
   [[ $fingers == 1 ]] || echo "The robot token without the finger joints (\`model.state_fingers = false\`)."
-  echo "\`${TASKS:+TASKS=$TASKS }${MASK_IDLE_TAIL:+MASK_IDLE_TAIL=$MASK_IDLE_TAIL }${FINGERS:+FINGERS=$FINGERS }bash scripts/libero_goal_per_task.sh $steps $jobs $out $data $seed\`"
+  [[ $queries == value ]] || echo "One decoder query per chunk step (\`decoder = { queries = \"step\" }\`)."
+  echo "\`${TASKS:+TASKS=$TASKS }${MASK_IDLE_TAIL:+MASK_IDLE_TAIL=$MASK_IDLE_TAIL }${FINGERS:+FINGERS=$FINGERS }${QUERIES:+QUERIES=$QUERIES }bash scripts/libero_goal_per_task.sh $steps $jobs $out $data $seed\`"
   echo
   echo "| task | episodes | subgoal completion % (95 % CI) | success % (95 % CI) | mean steps | over-repetition |"
   echo "|---|---:|---:|---:|---:|---:|"

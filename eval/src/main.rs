@@ -484,10 +484,15 @@ fn evaluate(args: &EvalArgs) -> anyhow::Result<()> {
     drop_journal(&s.out);
     if let Some(v) = &args.video {
         let page = s.out.join("index.html");
-        eval::write_atomic(
-            &page,
-            eval::viz::index_html(&results, &link(&s.out, v)).as_bytes(),
-        )?;
+        let dir = link(&s.out, v);
+        let video = |e: &eval::EpisodeResult| {
+            format!(
+                "{dir}/{}/episode_{:06}.mp4",
+                eval::task_slug(&e.task),
+                e.episode
+            )
+        };
+        eval::write_atomic(&page, report::index_html(&results, &video).as_bytes())?;
         eprintln!("videos under {}, listed in {}", v.display(), page.display());
     }
     if let Some(v) = viz {

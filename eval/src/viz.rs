@@ -211,61 +211,6 @@ impl Video {
     }
 }
 
-/// Escapes `&`, `<`, `>` and `"` for HTML.
-fn html_escape(s: &str) -> String {
-    s.replace('&', "&amp;")
-        .replace('<', "&lt;")
-        .replace('>', "&gt;")
-        .replace('"', "&quot;")
-}
-
-/// `OUT/index.html` of an evaluation with videos: the results table, then one row per episode
-/// (task, episode, seed, steps, subgoals, success, over-repetition) with its video
-/// (`videos` is the video folder as the page links it: relative to OUT where possible).
-pub fn index_html(results: &crate::Results, videos: &str) -> String {
-    let mut h = String::from(
-        "<!doctype html>\n<html><head><meta charset=\"utf-8\"><title>rollouts</title>\n<style>\
-         body{font-family:sans-serif}table{border-collapse:collapse}td,th{border:1px solid #ccc;\
-         padding:2px 6px}video{width:384px}</style></head><body>\n",
-    );
-    h.push_str(&format!(
-        "<h1>{} — {} episodes per task, seed {}{}</h1>\n<pre>{}</pre>\n<table>\n<tr><th>task</th>\
-         <th>episode</th><th>seed</th><th>steps</th><th>subgoals</th><th>success</th>\
-         <th>over-repetition</th><th>video</th></tr>\n",
-        html_escape(&results.policy),
-        results.episodes_per_task,
-        results.seed,
-        if results.full_budget {
-            ", full budget"
-        } else {
-            ""
-        },
-        html_escape(&crate::report::markdown(&results.tasks)),
-    ));
-    for e in &results.episodes {
-        let src = format!(
-            "{videos}/{}/episode_{:06}.mp4",
-            crate::task_slug(&e.task),
-            e.episode
-        );
-        h.push_str(&format!(
-            "<tr><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}/{}</td><td>{}</td><td>{}</td>\
-             <td><video controls preload=\"none\" src=\"{}\"></video></td></tr>\n",
-            html_escape(&e.task),
-            e.episode,
-            e.seed,
-            e.steps,
-            e.satisfied,
-            e.goal_len,
-            if e.success { "yes" } else { "no" },
-            if e.over_repetition { "yes" } else { "no" },
-            html_escape(&src),
-        ));
-    }
-    h.push_str("</table>\n</body></html>\n");
-    h
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -114,6 +114,8 @@ fn a_python_server_replaying_the_expert_scores_what_the_expert_scores() {
         let remote = RemoteConfig {
             url: format!("ws://127.0.0.1:{port}"),
             replan_steps: replan,
+            // The oracle subgoal's text rides along in one of the two passes.
+            send_subgoal: replan == 1,
             ..RemoteConfig::default()
         };
         let make = || -> Result<Box<dyn Policy>, EvalError> {

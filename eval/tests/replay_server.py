@@ -57,6 +57,11 @@ def main():
                 ws.send("no recorded episode %r" % (episode,))
                 ws.close()
                 return
+            subgoal = obs.get("libero_mem/subgoal", "")
+            if not isinstance(subgoal, str):
+                ws.send("libero_mem/subgoal is not text: %r" % (subgoal,))
+                ws.close()
+                return
             if "observation/image" not in obs or "observation/state" not in obs:
                 ws.send("missing openpi LIBERO keys: %r" % sorted(obs))
                 ws.close()
