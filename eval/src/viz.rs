@@ -150,27 +150,6 @@ impl Writer {
     }
 }
 
-/// One rollout video frame ([`data::video::frame`]) of `obs` at `step` of `budget`.
-pub fn video_frame(
-    obs: &Observation,
-    step: usize,
-    budget: usize,
-) -> Option<(Vec<u8>, usize, usize)> {
-    let g = obs.goal.as_ref();
-    let caption = data::video::Caption {
-        step,
-        budget,
-        progress: g.map(|g| (g.satisfied, g.goal_len, g.failed)),
-        pending: g.and_then(|g| g.pending.clone()),
-    };
-    data::video::frame(
-        &obs.agentview_rgb,
-        &obs.eye_in_hand_rgb,
-        obs.image_size,
-        &caption,
-    )
-}
-
 /// The video of one rollout: a frame per step (the observation the policy acted on) and the
 /// last observation.
 pub struct Video {
@@ -191,9 +170,11 @@ impl Video {
 
     /// Appends the frame of `obs` at `step`.
     pub fn frame(&mut self, obs: &Observation, step: usize) -> Result<(), EvalError> {
-        let (rgb, w, h) = video_frame(obs, step, self.budget).ok_or_else(|| EvalError::Output {
-            path: self.path.clone(),
-            message: "the environment renders no camera images".into(),
+        let (rgb, w, h) = sim::generate::video_frame(obs, step, self.budget).ok_or_else(|| {
+            EvalError::Output {
+                path: self.path.clone(),
+                message: "the environment renders no camera images".into(),
+            }
         })?;
         if self.writer.is_none() {
             self.writer = Some(data::video::VideoWriter::create(&self.path, w, h, 20)?);

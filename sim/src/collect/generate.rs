@@ -319,12 +319,17 @@ pub fn video_path(path: &Path) -> PathBuf {
     path.with_extension("mp4")
 }
 
-/// The video frame of `obs` in an episode of `task`.
-fn video_frame(obs: &crate::Observation, task: &TaskSpec) -> Option<(Vec<u8>, usize, usize)> {
+/// The rollout video frame ([`data::video::frame`]) of `obs` at `step` of a `budget`-step
+/// episode, captioned with its goal progress (what `sim generate --video` and `eval --video` write).
+pub fn video_frame(
+    obs: &crate::Observation,
+    step: usize,
+    budget: usize,
+) -> Option<(Vec<u8>, usize, usize)> {
     let g = obs.goal.as_ref();
     let caption = data::video::Caption {
-        step: obs.step,
-        budget: task.max_steps,
+        step,
+        budget,
         progress: g.map(|g| (g.satisfied, g.goal_len, g.failed)),
         pending: g.and_then(|g| g.pending.clone()),
     };
@@ -343,7 +348,7 @@ fn push_frame(
     obs: &crate::Observation,
     task: &TaskSpec,
 ) -> Result<(), GenerateError> {
-    let Some((rgb, w, h)) = video_frame(obs, task) else {
+    let Some((rgb, w, h)) = video_frame(obs, obs.step, task.max_steps) else {
         return Err(GenerateError::Argument(
             "video: the environment renders no camera images".into(),
         ));
