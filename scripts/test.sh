@@ -18,6 +18,15 @@ if ! "$venv/bin/python" -c "import mcap, mcap_protobuf, zstandard, websockets, m
 fi
 export DATA_MCAP_PYTHON="$PWD/$venv/bin/python"
 export EVAL_WS_PYTHON="$PWD/$venv/bin/python" EVAL_WS_REQUIRED=1
+# LeRobot (PyPI `lerobot` 0.4.4, the last for Python 3.11; it pulls torch: about 5 GB and 4 minutes)
+# opens our LeRobot export with its own LeRobotDataset in sim's lerobot test; the ffmpeg that its
+# imageio-ffmpeg ships decodes the videos for the import half of that test.
+lrvenv=target/lerobot-venv
+if ! "$lrvenv/bin/python" -c "import lerobot.datasets.lerobot_dataset, imageio_ffmpeg" 2>/dev/null; then
+  python3 -m venv "$lrvenv"
+  "$lrvenv/bin/pip" install -q "lerobot==0.4.4"
+fi
+export LEROBOT_PYTHON="$PWD/$lrvenv/bin/python" LEROBOT_REQUIRED=1
 log=$(mktemp)
 trap 'rm -f "$log"' EXIT
 status=0

@@ -43,6 +43,7 @@ pub mod exit;
 pub mod fsio;
 pub mod imageio;
 pub mod index;
+pub mod lerobot;
 pub mod pool;
 pub mod rlds;
 pub mod schema;

@@ -98,6 +98,39 @@ enum Cmd {
         #[arg(long, default_value_t = 64)]
         size: u32,
     },
+    /// Export dataset DIR (its index.json) as a LeRobotDataset v3.0 directory OUT (new; parquet
+    /// tables, H.264 videos; what `lerobot`'s `LeRobotDataset(repo_id, root=OUT)` loads).
+    ExportLerobot {
+        /// Dataset directory (with index.json).
+        dir: PathBuf,
+        /// Output directory (must not exist).
+        #[arg(long)]
+        out: PathBuf,
+        /// Transform applied to our upright frames (hflip: LeRobot's and openpi's LIBERO layout).
+        #[arg(long, value_enum, default_value_t = FlipArg::Hflip)]
+        flip: FlipArg,
+        /// A key frame every N frames (and at every episode start).
+        #[arg(long, default_value_t = 20)]
+        keyframe_every: u32,
+    },
+    /// Import a LeRobotDataset v3.0 directory ROOT (LIBERO keys: observation.images.image,
+    /// observation.images.wrist_image, observation.state, action) as mcap episodes in OUT.
+    ImportLerobot {
+        /// LeRobot dataset root (with meta/info.json).
+        root: PathBuf,
+        /// Output dataset directory.
+        #[arg(long)]
+        out: PathBuf,
+        /// Transform that makes the stored images upright (auto: ours as exported, else hflip).
+        #[arg(long, value_enum, default_value_t = FlipArg::Auto)]
+        flip: FlipArg,
+        /// Fraction of episodes in the validation split.
+        #[arg(long, default_value_t = 0.05)]
+        val_fraction: f64,
+        /// The ffmpeg program that decodes the videos.
+        #[arg(long, default_value = "ffmpeg")]
+        ffmpeg: PathBuf,
+    },
     /// Print windows/s for T-frame windows at the given sizes and worker counts.
     Bench {
         /// Window length T.
@@ -297,6 +330,51 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                 rep.flip.name()
             );
         }
+        Cmd::ExportLerobot {
+            dir,
+            out,
+            flip,
+            keyframe_every,
+        } => {
+            let opts = data::lerobot::ExportOptions {
+                flip: fixed_flip(flip).unwrap_or(Flip::Horizontal),
+                keyframe_every,
+                progress: true,
+                ..Default::default()
+            };
+            let r = data::lerobot::export(&dir, &out, &opts)?;
+            data::outln!(
+                "{}: {} episodes, {} frames, {} tasks ({} data files, {} video files per camera)",
+                out.display(),
+                r.episodes,
+                r.frames,
+                r.tasks,
+                r.data_files,
+                r.video_files
+            );
+        }
+        Cmd::ImportLerobot {
+            root,
+            out,
+            flip,
+            val_fraction,
+            ffmpeg,
+        } => {
+            let opts = data::lerobot::ImportOptions {
+                flip: fixed_flip(flip),
+                val_fraction,
+                ffmpeg,
+                ..Default::default()
+            };
+            let r = data::lerobot::import(&root, &out, &opts)?;
+            data::outln!(
+                "{}: {} episodes, {} steps from {}",
+                out.display(),
+                r.episodes,
+                r.frames,
+                root.display()
+            );
+        }
         Cmd::Synth {
             out,
             episodes,
@@ -346,6 +424,17 @@ fn run(cli: Cli) -> anyhow::Result<()> {
         }
     }
     Ok(())
+}
+
+/// The transform a flip argument names (None for `auto`).
+fn fixed_flip(f: FlipArg) -> Option<Flip> {
+    match f {
+        FlipArg::Auto => None,
+        FlipArg::None => Some(Flip::None),
+        FlipArg::Hflip => Some(Flip::Horizontal),
+        FlipArg::Vflip => Some(Flip::Vertical),
+        FlipArg::Rot180 => Some(Flip::Rotate180),
+    }
 }
 
 fn main() -> ExitCode {

@@ -77,6 +77,18 @@ pub fn frame(
     Some((img.into_raw(), w, h))
 }
 
+/// Encoder settings of a [`VideoWriter`] beyond size and rate.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct VideoOptions {
+    /// A key frame every this many frames (0: the encoder decides; readers that seek, as
+    /// LeRobot's do, decode from the key frame before the frame asked for).
+    pub keyframe_every: u32,
+    /// Never drop a frame (every pushed frame becomes one sample, so frame k is at time k / fps):
+    /// buffer-based rate control without frame skipping, where the default quality mode may skip
+    /// frames to hold its bit rate.
+    pub every_frame: bool,
+}
+
 /// Media time units per second of the video track.
 const TIMESCALE: u32 = 10_000;
 
@@ -90,6 +102,8 @@ pub struct VideoWriter {
     height: usize,
     frame_ticks: u32,
     frames: u64,
+    /// Bytes of encoded samples so far.
+    bytes: u64,
     /// Encoded frames waiting for the first SPS/PPS (the track's configuration).
     pending: Vec<(Vec<u8>, bool)>,
 }
@@ -120,6 +134,17 @@ fn strip_start_code(nal: &[u8]) -> &[u8] {
 impl VideoWriter {
     /// Starts `path` for `width × height` frames (both even, ≥ 16) at `fps` frames per second.
     pub fn create(path: impl AsRef<Path>, width: usize, height: usize, fps: u32) -> Result<Self> {
+        Self::create_with(path, width, height, fps, VideoOptions::default())
+    }
+
+    /// [`VideoWriter::create`] with encoder settings.
+    pub fn create_with(
+        path: impl AsRef<Path>,
+        width: usize,
+        height: usize,
+        fps: u32,
+        opts: VideoOptions,
+    ) -> Result<Self> {
         let path = path.as_ref().to_path_buf();
         if width < 16 || height < 16 || width % 2 == 1 || height % 2 == 1 || fps == 0 {
             return Err(video_err(
@@ -137,9 +162,19 @@ impl VideoWriter {
             .suffix(".mp4.tmp")
             .tempfile_in(dir)
             .map_err(|e| DataError::io(dir, e))?;
-        let config = EncoderConfig::new()
+        let mut config = EncoderConfig::new()
             .max_frame_rate(openh264::encoder::FrameRate::from_hz(fps as f32))
             .num_threads(1);
+        if opts.keyframe_every > 0 {
+            config = config.intra_frame_period(
+                openh264::encoder::IntraFramePeriod::from_num_frames(opts.keyframe_every),
+            );
+        }
+        if opts.every_frame {
+            config = config
+                .skip_frames(false)
+                .rate_control_mode(openh264::encoder::RateControlMode::Bufferbased);
+        }
         let encoder = Encoder::with_api_config(openh264::OpenH264API::from_source(), config)
             .map_err(|e| video_err(&path, e))?;
         Ok(VideoWriter {
@@ -151,6 +186,7 @@ impl VideoWriter {
             height,
             frame_ticks: TIMESCALE / fps,
             frames: 0,
+            bytes: 0,
             pending: Vec::new(),
         })
     }
@@ -205,6 +241,11 @@ impl VideoWriter {
         Ok(())
     }
 
+    /// Makes the next pushed frame a key frame (an IDR picture), e.g. where an episode starts.
+    pub fn force_keyframe(&mut self) {
+        self.encoder.force_intra_frame();
+    }
+
     fn start_track(&mut self, sps: Vec<u8>, pps: Vec<u8>) -> Result<()> {
         let tmp = self.tmp.as_ref().expect("open until finished");
         let file = tmp.reopen().map_err(|e| DataError::io(tmp.path(), e))?;
@@ -237,6 +278,7 @@ impl VideoWriter {
     }
 
     fn write_sample(&mut self, bytes: Vec<u8>, sync: bool) -> Result<()> {
+        let sample_len = bytes.len() as u64;
         let sample = mp4::Mp4Sample {
             start_time: self.frames * self.frame_ticks as u64,
             duration: self.frame_ticks,
@@ -250,12 +292,18 @@ impl VideoWriter {
             .write_sample(1, &sample)
             .map_err(|e| video_err(&self.path, e))?;
         self.frames += 1;
+        self.bytes += sample_len;
         Ok(())
     }
 
     /// Frames written so far.
     pub fn frames(&self) -> u64 {
         self.frames
+    }
+
+    /// Bytes of encoded video written so far (the file is this plus its headers and index).
+    pub fn bytes(&self) -> u64 {
+        self.bytes
     }
 
     /// Finishes the file (moov box) and moves it to its path; the number of frames.

@@ -112,3 +112,105 @@ fn synth_stats_inspect_and_bad_input_exit_codes() {
     assert_eq!(out.status.code(), Some(2));
     assert!(String::from_utf8_lossy(&out.stderr).contains("no TFRecord shards"));
 }
+
+/// `export-lerobot` / `import-lerobot`: the export's layout, then bad input — an existing output,
+/// a LeRobot directory missing a parquet file, no info.json — each one error naming the file,
+/// exit 2, nothing written.
+#[test]
+fn lerobot_export_and_bad_input() {
+    let tmp = tempfile::tempdir().unwrap();
+    let src = tmp.path().join("src");
+    for args in [
+        vec![
+            "synth",
+            "--out",
+            src.to_str().unwrap(),
+            "--episodes",
+            "3",
+            "--steps",
+            "6",
+            "--size",
+            "16",
+        ],
+        vec!["stats", src.to_str().unwrap(), "--val-fraction", "0"],
+    ] {
+        let out = data().args(&args).output().unwrap();
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+    }
+    let lr = tmp.path().join("lr");
+    let out = data()
+        .arg("export-lerobot")
+        .arg(&src)
+        .arg("--out")
+        .arg(&lr)
+        .output()
+        .unwrap();
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(text.contains("3 episodes, 18 frames, 1 tasks"), "{text}");
+    let info: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(lr.join("meta/info.json")).unwrap()).unwrap();
+    assert_eq!(info["total_episodes"], 3);
+    assert_eq!(info["total_frames"], 18);
+    assert_eq!(info["libero_mem"]["image_flip"], "hflip");
+    // No temporary directory is left beside the output.
+    let left: Vec<_> = std::fs::read_dir(tmp.path())
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .filter(|n| n.starts_with(".lerobot-"))
+        .collect();
+    assert!(left.is_empty(), "{left:?}");
+
+    // An existing output is refused.
+    let out = data()
+        .arg("export-lerobot")
+        .arg(&src)
+        .arg("--out")
+        .arg(&lr)
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(2), "{err}");
+    assert!(err.contains("already exists"), "{err}");
+
+    // A missing data file: one error naming it, exit 2, no output directory.
+    let missing = lr.join("data/chunk-000/file-000.parquet");
+    std::fs::rename(&missing, tmp.path().join("moved.parquet")).unwrap();
+    let back = tmp.path().join("back");
+    let out = data()
+        .arg("import-lerobot")
+        .arg(&lr)
+        .arg("--out")
+        .arg(&back)
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(2), "{err}");
+    assert!(
+        err.contains("data/chunk-000/file-000.parquet") && err.contains("missing"),
+        "{err}"
+    );
+    assert_eq!(err.trim().lines().count(), 1, "{err}");
+    assert!(!back.exists());
+
+    // No info.json.
+    let out = data()
+        .arg("import-lerobot")
+        .arg(tmp.path().join("nowhere"))
+        .arg("--out")
+        .arg(&back)
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(2), "{err}");
+    assert!(err.contains("nowhere/meta/info.json"), "{err}");
+    assert!(!back.exists());
+}
