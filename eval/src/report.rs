@@ -552,17 +552,40 @@ fn html_escape(s: &str) -> String {
         .replace('"', "&quot;")
 }
 
+/// A markdown table (as [`markdown`] writes it) as an HTML table; `**bold**` cells as `<b>`.
+fn html_table(md: &str) -> String {
+    let mut h = String::from("<table>\n");
+    for (i, line) in md.lines().filter(|l| l.starts_with('|')).enumerate() {
+        if i == 1 {
+            continue; // the alignment row
+        }
+        let tag = if i == 0 { "th" } else { "td" };
+        h.push_str("<tr>");
+        for cell in line.trim().trim_matches('|').split('|') {
+            let cell = cell.trim();
+            let text = match cell.strip_prefix("**").and_then(|c| c.strip_suffix("**")) {
+                Some(b) => format!("<b>{}</b>", html_escape(b)),
+                None => html_escape(cell),
+            };
+            h.push_str(&format!("<{tag}>{text}</{tag}>"));
+        }
+        h.push_str("</tr>\n");
+    }
+    h.push_str("</table>\n");
+    h
+}
+
 /// `OUT/index.html` of an evaluation with videos: the results table, then one row per episode
 /// (task, episode, seed, steps, subgoals, success, over-repetition) with its video, whose link
 /// `video` gives (relative to OUT where possible).
 pub fn index_html(results: &Results, video: &dyn Fn(&EpisodeResult) -> String) -> String {
     let mut h = String::from(
         "<!doctype html>\n<html><head><meta charset=\"utf-8\"><title>rollouts</title>\n<style>\
-         body{font-family:sans-serif}table{border-collapse:collapse}td,th{border:1px solid #ccc;\
+         body{font-family:sans-serif}table{border-collapse:collapse;margin-bottom:1em}td,th{border:1px solid #ccc;\
          padding:2px 6px}video{width:384px}</style></head><body>\n",
     );
     h.push_str(&format!(
-        "<h1>{} — {} episodes per task, seed {}{}</h1>\n<pre>{}</pre>\n<table>\n<tr><th>task</th>\
+        "<h1>{} — {} episodes per task, seed {}{}</h1>\n{}<h2>episodes</h2>\n<table>\n<tr><th>task</th>\
          <th>episode</th><th>seed</th><th>steps</th><th>subgoals</th><th>success</th>\
          <th>over-repetition</th><th>video</th></tr>\n",
         html_escape(&results.policy),
@@ -573,13 +596,17 @@ pub fn index_html(results: &Results, video: &dyn Fn(&EpisodeResult) -> String) -
         } else {
             ""
         },
-        html_escape(&markdown(&results.tasks)),
+        html_table(&markdown(&results.tasks)),
     ));
+    let poster = |src: &str| match src.strip_suffix(".mp4") {
+        Some(stem) => format!("{stem}.png"),
+        None => format!("{src}.png"),
+    };
     for e in &results.episodes {
         let src = video(e);
         h.push_str(&format!(
             "<tr><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}/{}</td><td>{}</td><td>{}</td>\
-             <td><video controls preload=\"none\" src=\"{}\"></video></td></tr>\n",
+             <td><video controls preload=\"none\" poster=\"{}\" src=\"{}\"></video></td></tr>\n",
             html_escape(&e.task),
             e.episode,
             e.seed,
@@ -588,6 +615,7 @@ pub fn index_html(results: &Results, video: &dyn Fn(&EpisodeResult) -> String) -
             e.goal_len,
             if e.success { "yes" } else { "no" },
             if e.over_repetition { "yes" } else { "no" },
+            html_escape(&poster(&src)),
             html_escape(&src),
         ));
     }

@@ -151,7 +151,7 @@ impl Writer {
 }
 
 /// The video of one rollout: a frame per step (the observation the policy acted on) and the
-/// last observation.
+/// last observation, with its first frame as a poster image beside it.
 pub struct Video {
     writer: Option<data::video::VideoWriter>,
     path: PathBuf,
@@ -178,6 +178,17 @@ impl Video {
         })?;
         if self.writer.is_none() {
             self.writer = Some(data::video::VideoWriter::create(&self.path, w, h, 20)?);
+            // The first frame as the video's poster (`<stem>.png` beside it), which a page shows
+            // before the video plays.
+            let poster = self.path.with_extension("png");
+            let img =
+                image::RgbImage::from_raw(w as u32, h as u32, rgb.clone()).ok_or_else(|| {
+                    EvalError::Output {
+                        path: poster.clone(),
+                        message: "frame size".into(),
+                    }
+                })?;
+            data::fsio::write_png(&poster, &img)?;
         }
         self.writer.as_mut().expect("created").push(&rgb)?;
         Ok(())

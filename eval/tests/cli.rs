@@ -526,11 +526,22 @@ fn videos_of_every_rollout_and_a_page_linking_them() {
     let results: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(out.join("results.json")).unwrap()).unwrap();
     let page = std::fs::read_to_string(out.join("index.html")).unwrap();
+    // The results table as an HTML table.
+    assert!(
+        page.contains("<th>subgoal completion % (95 % CI)</th>")
+            && page.contains("<td>libero_mem/t1</td>"),
+        "{page}"
+    );
     for e in results["episodes"].as_array().unwrap() {
         let k = e["episode"].as_u64().unwrap();
         let steps = e["steps"].as_u64().unwrap();
         let rel = format!("videos/libero_mem-t1/episode_{k:06}.mp4");
         assert!(page.contains(&format!("src=\"{rel}\"")), "{page}");
+        // The first frame as the video's poster.
+        let poster = rel.replace(".mp4", ".png");
+        assert!(page.contains(&format!("poster=\"{poster}\"")), "{page}");
+        let img = image::open(out.join(&poster)).unwrap();
+        assert_eq!((img.width(), img.height()), (128, 88));
         let bytes = std::fs::read(out.join(&rel)).unwrap();
         let size = bytes.len() as u64;
         let r = mp4::Mp4Reader::read_header(std::io::Cursor::new(bytes), size).unwrap();
