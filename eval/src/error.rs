@@ -66,14 +66,16 @@ impl EvalError {
 }
 
 impl data::exit::BadInput for EvalError {
-    /// Arguments, tasks, run directories, results files, malformed data.
+    /// Arguments, tasks, run directories, results files, malformed data, and a remote policy
+    /// that cannot be reached or answers out of protocol (the `--policy ws://` given).
     fn is_bad_input(&self) -> bool {
         match self {
             EvalError::Task(_)
             | EvalError::Argument(_)
             | EvalError::Run { .. }
             | EvalError::Results { .. }
-            | EvalError::Input { .. } => true,
+            | EvalError::Input { .. }
+            | EvalError::Remote(_) => true,
             EvalError::Data(d) => d.is_bad_input(),
             EvalError::Env(e) => e.is_bad_input(),
             _ => false,

@@ -409,7 +409,7 @@ fn bad_policy_urls_and_unreachable_servers_are_one_error() {
         "--out",
         dir.to_str().unwrap(),
     ]);
-    assert_eq!(code, 1, "{err}");
+    assert_eq!(code, 2, "{err}");
     assert!(
         err.contains(&format!("policy server {url}: cannot connect")),
         "{err}"

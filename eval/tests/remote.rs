@@ -147,3 +147,71 @@ fn a_python_server_replaying_the_expert_scores_what_the_expert_scores() {
         "{msg}"
     );
 }
+
+/// A server that fails mid-evaluation — closes the connection, replies `[H, 5]` actions, or a NaN
+/// in the chunk — stops `eval --policy ws://` with one error naming the server, the episode and
+/// the step (exit 2), no results file, and the episode finished before it kept in the journal.
+#[test]
+fn a_server_failing_mid_evaluation_is_one_error_and_keeps_finished_episodes() {
+    let Some(python) = python() else { return };
+    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/replay_server.py");
+    let budget = sim::task::resolve("t1").unwrap().max_steps;
+    // Episode 0 takes ceil(budget / 5) requests at 5 replan steps; episode 1 fails at its 4th.
+    let fail_after = budget.div_ceil(5) + 3;
+    for (mode, want) in [
+        ("close", "the server closed the connection"),
+        ("shape", "`actions` has shape [8, 5]"),
+        ("nan", "`actions`[1, 3] is NaN, not a finite number"),
+    ] {
+        let mut child = Command::new(&python)
+            .arg(&script)
+            .args(["--zeros", "--fail", mode, "--fail-after"])
+            .arg(fail_after.to_string())
+            .stdout(Stdio::piped())
+            .spawn()
+            .expect("the Python server starts");
+        let mut line = String::new();
+        BufReader::new(child.stdout.take().unwrap())
+            .read_line(&mut line)
+            .unwrap();
+        let _server = Server(child);
+        let port: u16 = line.trim().strip_prefix("port ").unwrap().parse().unwrap();
+        let url = format!("ws://127.0.0.1:{port}");
+        let dir = tempfile::tempdir().unwrap();
+        let out = dir.path().join("out");
+        let run = Command::new(env!("CARGO_BIN_EXE_eval"))
+            .args(["--tasks", "t1", "--episodes", "2", "--seed", "7"])
+            .args([
+                "--policy",
+                &url,
+                "--image-size",
+                "64",
+                "--remote-timeout",
+                "20",
+            ])
+            .arg("--out")
+            .arg(&out)
+            .output()
+            .unwrap();
+        let err = String::from_utf8_lossy(&run.stderr);
+        assert_eq!(run.status.code(), Some(2), "{mode}: {err}");
+        let msg: Vec<&str> = err.lines().filter(|l| l.contains("error")).collect();
+        assert_eq!(msg.len(), 1, "{mode}: one error line: {err}");
+        assert!(
+            msg[0].contains(&format!("policy server {url}: episode libero_mem/t1@"))
+                && msg[0].contains("step 15")
+                && msg[0].contains(want),
+            "{mode}: {err}"
+        );
+        assert!(
+            !out.join("results.json").exists(),
+            "{mode}: no results file"
+        );
+        let journal = std::fs::read_to_string(out.join("episodes.jsonl")).unwrap();
+        assert_eq!(
+            journal.lines().count(),
+            2,
+            "{mode}: the header and the finished episode: {journal}"
+        );
+    }
+}

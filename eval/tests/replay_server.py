@@ -6,7 +6,7 @@ arrays are packed as openpi_client's msgpack_numpy packs them. Each request name
 recorded actions of that episode from that step (fewer at its end, the last one repeated to H).
 
     python replay_server.py ACTIONS.json [--horizon 8]
-    python replay_server.py --zeros [--horizon 8]
+    python replay_server.py --zeros [--horizon 8] [--fail close|shape|nan --fail-after N]
 
 ACTIONS.json maps episode ids to lists of 7-D actions; with --zeros every reply is a chunk of
 zero actions (a trivial server, to measure the protocol's cost: scripts/bench_remote.sh). Prints `port N` once listening on a free
@@ -37,17 +37,34 @@ def main():
     ap.add_argument("actions", nargs="?")
     ap.add_argument("--horizon", type=int, default=8)
     ap.add_argument("--zeros", action="store_true")
+    # Misbehave after this many good replies (counted over all connections): close the
+    # connection, reply with actions of shape [H, 5], or with a NaN in the chunk.
+    ap.add_argument("--fail", choices=["close", "shape", "nan"])
+    ap.add_argument("--fail-after", type=int, default=0)
     args = ap.parse_args()
     episodes = {}
     if args.actions:
         with open(args.actions) as f:
             episodes = json.load(f)
     zeros = ndarray_f32([[0.0] * 7] * args.horizon)
+    replies = [0]
 
     def handler(ws):
         ws.send(msgpack.packb({"server": "replay", "episodes": len(episodes)}))
         for message in ws:
             obs = msgpack.unpackb(message)
+            replies[0] += 1
+            if args.fail and replies[0] > args.fail_after:
+                if args.fail == "close":
+                    ws.close()
+                    return
+                if args.fail == "shape":
+                    ws.send(msgpack.packb({"actions": ndarray_f32([[0.0] * 5] * args.horizon)}))
+                    continue
+                rows = [[0.0] * 7 for _ in range(args.horizon)]
+                rows[1][3] = float("nan")
+                ws.send(msgpack.packb({"actions": ndarray_f32(rows)}))
+                continue
             if args.zeros:
                 ws.send(msgpack.packb({"actions": zeros}))
                 continue

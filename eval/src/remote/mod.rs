@@ -389,11 +389,8 @@ impl Policy for RemotePolicy {
             .pop_front()
             .ok_or_else(|| fail("empty action chunk".into()))?;
         for v in a.iter_mut() {
-            *v = if v.is_finite() {
-                v.clamp(-1.0, 1.0)
-            } else {
-                0.0
-            };
+            // Finite: `wire::read_actions` refuses a chunk with NaN or infinity.
+            *v = v.clamp(-1.0, 1.0);
         }
         Ok(a)
     }

@@ -204,6 +204,14 @@ pub fn read_actions(reply: &Value) -> Result<Vec<[f32; 7]>, WireError> {
         ));
     }
     let v = a.to_f32();
+    for i in 0..h {
+        for j in 0..7 {
+            let x = v[i * width + j];
+            if !x.is_finite() {
+                return Err(format!("`actions`[{i}, {j}] is {x}, not a finite number"));
+            }
+        }
+    }
     Ok((0..h)
         .map(|i| std::array::from_fn(|j| v[i * width + j]))
         .collect())
