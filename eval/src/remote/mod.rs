@@ -465,6 +465,6 @@ mod tests {
                 .starts_with(&format!("policy server {url}: cannot connect")),
             "{e}"
         );
-        assert_eq!(e.exit_code(), 1);
+        assert_eq!(e.exit_code(), 2, "the --policy given is bad input");
     }
 }
