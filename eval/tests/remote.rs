@@ -39,11 +39,16 @@ fn python() -> Option<PathBuf> {
 
 /// Starts replay_server.py on `actions`; the server and its port.
 fn start(python: &Path, actions: &Path, horizon: usize) -> (Server, u16) {
+    let actions = actions.to_string_lossy();
+    start_with(python, &[&actions, "--horizon", &horizon.to_string()])
+}
+
+/// Starts replay_server.py with `args`; the server and the port it printed.
+fn start_with(python: &Path, args: &[&str]) -> (Server, u16) {
     let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/replay_server.py");
     let mut child = Command::new(python)
         .arg(script)
-        .arg(actions)
-        .args(["--horizon", &horizon.to_string()])
+        .args(args)
         .stdout(Stdio::piped())
         .spawn()
         .expect("the Python server starts");
@@ -154,7 +159,6 @@ fn a_python_server_replaying_the_expert_scores_what_the_expert_scores() {
 #[test]
 fn a_server_failing_mid_evaluation_is_one_error_and_keeps_finished_episodes() {
     let Some(python) = python() else { return };
-    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/replay_server.py");
     let budget = sim::task::resolve("t1").unwrap().max_steps;
     // Episode 0 takes ceil(budget / 5) requests at 5 replan steps; episode 1 fails at its 4th.
     let fail_after = budget.div_ceil(5) + 3;
@@ -163,19 +167,11 @@ fn a_server_failing_mid_evaluation_is_one_error_and_keeps_finished_episodes() {
         ("shape", "`actions` has shape [8, 5]"),
         ("nan", "`actions`[1, 3] is NaN, not a finite number"),
     ] {
-        let mut child = Command::new(&python)
-            .arg(&script)
-            .args(["--zeros", "--fail", mode, "--fail-after"])
-            .arg(fail_after.to_string())
-            .stdout(Stdio::piped())
-            .spawn()
-            .expect("the Python server starts");
-        let mut line = String::new();
-        BufReader::new(child.stdout.take().unwrap())
-            .read_line(&mut line)
-            .unwrap();
-        let _server = Server(child);
-        let port: u16 = line.trim().strip_prefix("port ").unwrap().parse().unwrap();
+        let fail_after = fail_after.to_string();
+        let (_server, port) = start_with(
+            &python,
+            &["--zeros", "--fail", mode, "--fail-after", &fail_after],
+        );
         let url = format!("ws://127.0.0.1:{port}");
         let dir = tempfile::tempdir().unwrap();
         let out = dir.path().join("out");
