@@ -82,7 +82,7 @@ fn libero_mem_budgets_goal_lengths_and_instructions() {
 
 #[test]
 fn libero_goal_tasks_match_the_tsv() {
-    let tsv = include_str!("../../../shared/spec/libero_goal_tasks.tsv");
+    let tsv = include_str!("fixtures/libero_goal_tasks.tsv");
     let mut rows = 0;
     for line in tsv
         .lines()
