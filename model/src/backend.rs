@@ -19,6 +19,8 @@ pub enum BackendKind {
     Ndarray,
     /// wgpu (cargo feature `wgpu`).
     Wgpu,
+    /// CUDA, the first GPU (cargo feature `cuda`).
+    Cuda,
 }
 
 impl FromStr for BackendKind {
@@ -28,8 +30,9 @@ impl FromStr for BackendKind {
             "flex" => Ok(BackendKind::Flex),
             "ndarray" => Ok(BackendKind::Ndarray),
             "wgpu" => Ok(BackendKind::Wgpu),
+            "cuda" => Ok(BackendKind::Cuda),
             _ => Err(format!(
-                "unknown backend `{s}` (expected flex, ndarray or wgpu)"
+                "unknown backend `{s}` (expected flex, ndarray, wgpu or cuda)"
             )),
         }
     }
@@ -44,6 +47,7 @@ pub fn device(kind: BackendKind) -> Result<Device> {
         BackendKind::Flex => Ok(Device::flex()),
         BackendKind::Ndarray => ndarray(),
         BackendKind::Wgpu => wgpu(),
+        BackendKind::Cuda => cuda(),
     }
 }
 
@@ -74,6 +78,19 @@ fn wgpu() -> Result<Device> {
     })
 }
 
+#[cfg(feature = "cuda")]
+fn cuda() -> Result<Device> {
+    Ok(Device::cuda(0))
+}
+
+#[cfg(not(feature = "cuda"))]
+fn cuda() -> Result<Device> {
+    Err(ModelError::BackendUnavailable {
+        name: "cuda".into(),
+        feature: "cuda".into(),
+    })
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -87,11 +104,17 @@ mod tests {
             assert!(e.to_string().contains("--features train/ndarray"), "{e}");
         }
         assert_eq!("wgpu".parse::<BackendKind>(), Ok(BackendKind::Wgpu));
+        assert_eq!("cuda".parse::<BackendKind>(), Ok(BackendKind::Cuda));
+        #[cfg(not(feature = "cuda"))]
+        {
+            let e = device(BackendKind::Cuda).unwrap_err();
+            assert!(e.to_string().contains("--features train/cuda"), "{e}");
+        }
         assert!(
-            "cuda"
+            "metal"
                 .parse::<BackendKind>()
                 .unwrap_err()
-                .contains("flex, ndarray or wgpu")
+                .contains("flex, ndarray, wgpu or cuda")
         );
     }
 }

@@ -646,8 +646,8 @@ variant = "e_slotssm"
         assert!(e.contains("model.overrides.encoder.chanels"), "{e}");
         let e = Config::parse(&MIN.replace("e_slotssm", "slotssm")).unwrap_err();
         assert!(e.contains("model.variant"), "{e}");
-        let e = Config::parse(&format!("{MIN}[backend]\nkind = \"cuda\"\n")).unwrap_err();
-        assert!(e.contains("cuda"), "{e}");
+        let e = Config::parse(&format!("{MIN}[backend]\nkind = \"metal\"\n")).unwrap_err();
+        assert!(e.contains("metal"), "{e}");
     }
 
     #[test]
