@@ -17,11 +17,13 @@
 
 #![warn(missing_docs)]
 
+pub mod bench;
 pub mod checkpoint;
 pub mod clip;
 pub mod config;
 pub mod dataset;
 pub mod error;
+pub mod loader;
 pub mod metrics;
 pub mod plot;
 pub mod schedule;
@@ -30,4 +32,4 @@ pub mod trainer;
 
 pub use config::{BackendKind, Config};
 pub use error::{Result, TrainError};
-pub use trainer::{TrainOptions, TrainSummary, plot_run, train};
+pub use trainer::{TrainOptions, TrainSummary, open_data, plot_run, train};

@@ -1,5 +1,6 @@
-//! `train CONFIG [--set KEY=VALUE]… [--resume] [--keep K] [--steps N] [--run-dir DIR] [--backend B]`: trains an
-//! experiment config; exit status 2 on bad input (config, dataset, backend, checkpoint).
+//! `train CONFIG [--set KEY=VALUE]… [--resume] [--keep K] [--steps N] [--run-dir DIR] [--backend B]
+//! [--threads N] [--bench N [--json]]`: trains an experiment config (or measures the trainer's speed on
+//! it); exit status 2 on bad input (config, dataset, backend, checkpoint).
 
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -25,7 +26,8 @@ struct Args {
     /// Run directory (default: runs/<name>).
     #[arg(long)]
     run_dir: Option<PathBuf>,
-    /// Backend: flex, ndarray (feature `ndarray`) or wgpu (feature `wgpu`); overrides [backend].
+    /// Backend: flex, ndarray, wgpu or cuda (the last three behind the cargo features of the same
+    /// name); overrides [backend].
     #[arg(long)]
     backend: Option<String>,
     /// Override a config key, `KEY=VALUE` with a TOML value (repeatable), e.g.
@@ -35,10 +37,50 @@ struct Args {
     /// No progress bar.
     #[arg(long)]
     quiet: bool,
+    /// Threads of the pool that runs the tensor kernels and reads the data (default: one per
+    /// core, or RAYON_NUM_THREADS). Results are the same bit for bit at any count.
+    #[arg(long, value_parser = clap::value_parser!(u16).range(1..))]
+    threads: Option<u16>,
+    /// Prepare each batch in the loop instead of on the loader thread (same batches; slower).
+    #[arg(long)]
+    no_prefetch: bool,
+    /// Measure instead of training: N timed steps (after 3 untimed) in a throw-away run
+    /// directory, with the time per step and its parts, and the loader's windows/s alone.
+    #[arg(long, value_name = "N", value_parser = clap::value_parser!(u64).range(1..))]
+    bench: Option<u64>,
+    /// With --bench: print the figures as one JSON line instead of a table.
+    #[arg(long, requires = "bench")]
+    json: bool,
 }
 
-fn run(args: Args) -> Result<train::TrainSummary, train::TrainError> {
+enum Outcome {
+    Trained(train::TrainSummary),
+    Measured(train::bench::BenchReport, bool),
+}
+
+fn run(args: Args) -> Result<Outcome, train::TrainError> {
+    if let Some(n) = args.threads {
+        rayon::ThreadPoolBuilder::new()
+            .num_threads(usize::from(n))
+            .build_global()
+            .map_err(|e| train::TrainError::Other(format!("--threads: {e}")))?;
+    }
     let cfg = train::Config::load_with(&args.config, &args.sets)?;
+    if let Some(steps) = args.bench {
+        let mut cfg = cfg;
+        if let Some(b) = &args.backend {
+            cfg.backend.kind = b.parse().map_err(train::TrainError::Usage)?;
+        }
+        let opts = train::bench::BenchOptions {
+            steps,
+            warmup: 3,
+            loader_batches: 20,
+        };
+        return Ok(Outcome::Measured(
+            train::bench::run(&cfg, &opts, !args.quiet)?,
+            args.json,
+        ));
+    }
     let opts = train::TrainOptions {
         resume: args.resume,
         keep: args.keep,
@@ -52,8 +94,9 @@ fn run(args: Args) -> Result<train::TrainSummary, train::TrainError> {
             .map_err(train::TrainError::Usage)?,
         progress: !args.quiet,
         stop_at: None,
+        no_prefetch: args.no_prefetch,
     };
-    train::train(&cfg, &opts)
+    train::train(&cfg, &opts).map(Outcome::Trained)
 }
 
 fn main() -> ExitCode {
@@ -65,7 +108,15 @@ fn main() -> ExitCode {
         }
     };
     match run(args) {
-        Ok(s) => {
+        Ok(Outcome::Measured(report, json)) => {
+            if json {
+                data::outln!("{}", serde_json::to_string(&report).expect("plain numbers"));
+            } else {
+                data::outln!("{}", report.to_markdown());
+            }
+            ExitCode::SUCCESS
+        }
+        Ok(Outcome::Trained(s)) => {
             let fmt = |x: Option<f64>| x.map_or("-".into(), |v| format!("{v:.4}"));
             data::outln!(
                 "{}: steps {}..{}, loss {} → {}, val {}, {:.2} steps/s",

@@ -35,9 +35,19 @@ pub struct Record {
     /// Seconds since the run started (cumulative over resumes).
     #[serde(default)]
     pub time_s: f64,
-    /// Seconds this step spent reading and batching windows.
+    /// Seconds this step waited for its batch (read, augmented and batched on the loader
+    /// thread ahead of the step; in the loop with `--no-prefetch`).
     #[serde(default)]
     pub data_s: f64,
+    /// Seconds of the forward pass and the losses.
+    #[serde(default)]
+    pub forward_s: f64,
+    /// Seconds of the backward pass.
+    #[serde(default)]
+    pub backward_s: f64,
+    /// Seconds of the gradient clip and the optimiser step.
+    #[serde(default)]
+    pub optim_s: f64,
     /// Name of the training stage (staged training only; `loss` is then that stage's total).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub stage: Option<String>,

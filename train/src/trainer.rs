@@ -13,6 +13,7 @@
 //! resumed from a checkpoint ends bit for bit where the uninterrupted run ends.
 
 use std::path::{Path, PathBuf};
+use std::sync::Arc;
 use std::time::Instant;
 
 use burn::optim::{AdamWConfig, GradientsParams, ModuleOptimizer};
@@ -26,6 +27,7 @@ use crate::clip::clip_global_norm;
 use crate::config::{BackendKind, Config, ObsMode, Sampling};
 use crate::dataset::{EpisodeSampler, RunData, Sampler, ensure_dataset};
 use crate::error::{Result, TrainError};
+use crate::loader::{self, Draw, DrawKey, Prefetcher};
 use crate::metrics::{self, JsonlWriter, Record};
 use crate::plot;
 use crate::schedule::WarmupCosine;
@@ -50,7 +52,13 @@ pub struct TrainOptions {
     /// Stop (after checkpointing) once this many steps are done, as if killed there; the
     /// schedule still spans `steps` (used to test resuming).
     pub stop_at: Option<u64>,
+    /// Prepare each batch in the loop instead of on the loader thread ahead of the step (the
+    /// same batches either way; for measuring).
+    pub no_prefetch: bool,
 }
+
+/// Batches the loader thread keeps ready ahead of the step.
+const PREFETCH_DEPTH: usize = 2;
 
 /// What a run did.
 #[derive(Clone, Debug, Serialize, Deserialize)]
@@ -111,6 +119,9 @@ fn record(step: u64, l: &Losses) -> Record {
         grad_norm: 0.0,
         time_s: 0.0,
         data_s: 0.0,
+        forward_s: 0.0,
+        backward_s: 0.0,
+        optim_s: 0.0,
         stage: None,
     }
 }
@@ -226,20 +237,13 @@ fn write_file(path: &Path, text: &str) -> Result<()> {
     data::index::write_atomic(path, text.as_bytes()).map_err(TrainError::from)
 }
 
-/// Trains `cfg` (see the module docs); resumes automatically from the run directory's newest
-/// complete checkpoint.
-pub fn train(cfg: &Config, opts: &TrainOptions) -> Result<TrainSummary> {
-    let cfg = resolve(cfg, opts);
-    let run = run_dir(&cfg, opts);
-    let t = cfg.train.clone();
-    let device = model::backend::device(cfg.backend.kind)?;
-    let ad = device.clone().autodiff();
-
-    ensure_dataset(&cfg, opts.progress)?;
+/// Opens the dataset of `cfg` (which must exist) for the model it configures: the model config
+/// completed from the data (vocabulary; in state mode the object tokens) and the run's windows.
+pub fn open_data(cfg: &Config) -> Result<(ModelConfig, RunData)> {
     // Every episode read and checked once, for the checks below and both splits' windows.
     let opened = data::OpenedDataset::open(&cfg.data.dir)?;
     let vocab = RunData::model_vocab(&opened.index)?;
-    let mut mcfg: ModelConfig = cfg.model_config(vocab).map_err(|m| config_error(&cfg, m))?;
+    let mut mcfg: ModelConfig = cfg.model_config(vocab).map_err(|m| config_error(cfg, m))?;
     if mcfg.variant.needs_subgoal_text() {
         crate::dataset::check_goals(&opened)?;
     }
@@ -253,11 +257,26 @@ pub fn train(cfg: &Config, opts: &TrainOptions) -> Result<TrainSummary> {
             )?;
             mcfg = mcfg.with_state(spec.tokens(), spec.num_categories(), spec.features());
             mcfg.validate()
-                .map_err(|e| config_error(&cfg, e.to_string()))?;
+                .map_err(|e| config_error(cfg, e.to_string()))?;
             Some(spec)
         }
     };
-    let data = RunData::open(&cfg, &mcfg, state, &opened)?;
+    let data = RunData::open(cfg, &mcfg, state, &opened)?;
+    Ok((mcfg, data))
+}
+
+/// Trains `cfg` (see the module docs); resumes automatically from the run directory's newest
+/// complete checkpoint.
+pub fn train(cfg: &Config, opts: &TrainOptions) -> Result<TrainSummary> {
+    let cfg = resolve(cfg, opts);
+    let run = run_dir(&cfg, opts);
+    let t = cfg.train.clone();
+    let device = model::backend::device(cfg.backend.kind)?;
+    let ad = device.clone().autodiff();
+
+    ensure_dataset(&cfg, opts.progress)?;
+    let (mcfg, data) = open_data(&cfg)?;
+    let data = Arc::new(data);
 
     std::fs::create_dir_all(&run).map_err(|e| TrainError::io(&run, e))?;
     checkpoint::clean_temporaries(&run)?;
@@ -411,25 +430,49 @@ pub fn train(cfg: &Config, opts: &TrainOptions) -> Result<TrainSummary> {
     let mut val_loss = None;
     let mut last_val_step = None;
     let val_due = |step: u64| t.val_every > 0 && step.is_multiple_of(t.val_every);
+    // The loader thread draws from a copy of the sampler; the loop advances the saved one.
+    let draw = match &state.episodes {
+        Some(lanes) => Draw::Episodes(lanes.clone()),
+        None => Draw::Windows(state.sampler.clone()),
+    };
+    let prefetch = (!opts.no_prefetch && end > state.step).then(|| {
+        Prefetcher::spawn(
+            Arc::clone(&data),
+            draw,
+            t.batch_size,
+            window,
+            end - state.step,
+            PREFETCH_DEPTH,
+            ad.clone(),
+        )
+    });
     while state.step < end {
         let data_started = Instant::now();
-        let (batch, fresh) = match state.episodes.as_mut() {
+        let key = match state.episodes.as_mut() {
             // Consecutive chunks of whole episodes: the memory of the previous chunk goes on.
-            Some(lanes) => {
-                let spans = lanes.next_batch(t.batch_size, window, |k| data.train.episode_len(k));
-                let (batch, fresh) = data.chunk_batch(&spans, &ad)?;
-                (batch, Some(fresh))
-            }
-            None => {
-                let indices = state.sampler.next_batch(t.batch_size);
-                (data.batch(&data.train, &indices, &ad)?, None)
-            }
+            Some(lanes) => DrawKey::Episodes(
+                lanes.next_batch(t.batch_size, window, |k| data.train.episode_len(k)),
+            ),
+            None => DrawKey::Windows(state.sampler.next_batch(t.batch_size)),
         };
-        let carry_in = match fresh {
+        let prepared = match &prefetch {
+            Some(p) => p.next()?,
+            None => loader::prepare(&data, key.clone(), &ad)?,
+        };
+        if prepared.key != key {
+            return Err(TrainError::Other(format!(
+                "step {}: the loader drew other windows than the sampler",
+                state.step + 1
+            )));
+        }
+        let carry_in = match prepared.fresh {
             Some(fresh) if !carry.is_empty() => carry.clone().with_fresh(fresh),
             _ => Carry::default(),
         };
+        let batch = prepared.batch;
+        // Time the step waited for its batch (with the loader thread: ~0 once it keeps up).
         let data_s = data_started.elapsed().as_secs_f64();
+        let forward_started = Instant::now();
         let (_, losses, carry_out) = model.forward_from(&batch, carry_in)?;
         if state.episodes.is_some() {
             carry = carry_out;
@@ -457,13 +500,18 @@ pub fn train(cfg: &Config, opts: &TrainOptions) -> Result<TrainSummary> {
         if !rec.loss.is_finite() {
             return Err(TrainError::NonFinite(state.step + 1));
         }
+        rec.forward_s = forward_started.elapsed().as_secs_f64();
+        let backward_started = Instant::now();
         let mut grads = GradientsParams::from_grads(total.backward(), &model);
+        rec.backward_s = backward_started.elapsed().as_secs_f64();
+        let optim_started = Instant::now();
         if let Some(s) = stage {
             stages::freeze(&model, s, &mut grads);
         }
         rec.grad_norm = clip_global_norm(&model, &mut grads, t.grad_clip);
         rec.lr = sched.lr(state.step);
         model = optim.step(rec.lr, model, grads);
+        rec.optim_s = optim_started.elapsed().as_secs_f64();
         state.step += 1;
         state.elapsed_s = elapsed_before + started.elapsed().as_secs_f64();
         rec.time_s = state.elapsed_s;

@@ -132,6 +132,41 @@ fn stopped_and_resumed_run_ends_with_identical_weights() {
     }
 }
 
+/// The loader thread prepares the batches the loop would have made: a run with it and one
+/// without end with the same weights, bit for bit, and the same per-step losses.
+#[test]
+fn prefetched_batches_train_like_batches_made_in_the_loop() {
+    let _g = serial();
+    for sampling in [
+        train::config::Sampling::Episodes,
+        train::config::Sampling::Windows,
+    ] {
+        let (a, b) = (tempfile::tempdir().unwrap(), tempfile::tempdir().unwrap());
+        let mut cfg = short_config(7, 0);
+        cfg.train.sampling = sampling;
+        train::train(&cfg, &opts(a.path())).unwrap();
+        let in_loop = TrainOptions {
+            no_prefetch: true,
+            ..opts(b.path())
+        };
+        train::train(&cfg, &in_loop).unwrap();
+        let losses = |d: &Path| {
+            metrics::read(&d.join("metrics.jsonl"))
+                .unwrap()
+                .iter()
+                .map(|r| r.loss.to_bits())
+                .collect::<Vec<_>>()
+        };
+        assert_eq!(losses(a.path()).len(), 7);
+        assert_eq!(losses(a.path()), losses(b.path()), "{sampling:?}");
+        assert_eq!(
+            common::bits(&common::final_weights(a.path())),
+            common::bits(&common::final_weights(b.path())),
+            "{sampling:?}"
+        );
+    }
+}
+
 /// Episode sampling carries the memory across batches: the checkpoint keeps it (carry.json),
 /// so the resumed run continues with the memory the uninterrupted run had.
 fn stop_and_resume(sampling: train::config::Sampling) {

@@ -1,0 +1,59 @@
+#!/usr/bin/env bash
+# Training throughput: the real trainer (`train CONFIG --bench N`) on the t3 settings (tiny
+# e_slotssm, B=8, T=16, 64², augmentation on) at 1 and 2 threads, and — when its venv is present —
+# the PyTorch twin of the tiny model (../shared/tools/torch_twin, the yardstick; not part of the
+# product) timed in the same run, with the ratio ours / PyTorch per thread count (≤ 1: Burn no slower).
+#
+#   bash scripts/bench_train.sh [CONFIG] [STEPS]
+#
+# Environment: TORCH_TWIN (the twin's folder, default ../shared/tools/torch_twin), TORCH_TWIN_PYTHON
+# (default ~/.venvs/torch_twin/bin/python). CONFIG defaults to configs/t3.toml, whose dataset is
+# generated first when missing (100 expert episodes). Build: cargo build --release -p train.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+config=${1:-configs/t3.toml}
+steps=${2:-10}
+twin=${TORCH_TWIN:-../shared/tools/torch_twin}
+py=${TORCH_TWIN_PYTHON:-$HOME/.venvs/torch_twin/bin/python}
+bin=target/release/train
+[ -x "$bin" ] || cargo build -q --release -p train
+out=$(mktemp -d)
+trap 'rm -rf "$out"' EXIT
+
+for n in 1 2; do
+  echo "== ours, $n thread(s): $bin $config --bench $steps --threads $n" >&2
+  "$bin" "$config" --bench "$steps" --threads "$n" --quiet --json >"$out/ours_$n.json"
+done
+if [ -x "$py" ] && [ -f "$twin/bench.py" ]; then
+  echo "== PyTorch twin: bench.py --steps 15 --warmup 3 --threads 1,2 --skip-stream --set sa_dec_hidden=64" >&2
+  (cd "$twin" && "$py" bench.py --steps 15 --warmup 3 --threads 1,2 --skip-stream \
+    --set sa_dec_hidden=64) >"$out/twin.json"
+else
+  echo "(no PyTorch twin at $twin with $py: ours only)" >&2
+fi
+
+python3 - "$out" <<'EOF'
+import json, os, sys
+out = sys.argv[1]
+ours = {n: json.load(open(f"{out}/ours_{n}.json")) for n in (1, 2)}
+twin = json.load(open(f"{out}/twin.json")) if os.path.exists(f"{out}/twin.json") else None
+r = ours[1]
+print(f"trainer bench: {r['name']} ({r['variant']}, {r['params']} parameters, B={r['batch_size']}, T={r['window']}), "
+      f"median of {r['steps']} steps after 3 untimed\n")
+print("| threads | step ms | data wait | forward | backward | clip+AdamW | steps/s | PyTorch twin ms | ours / twin |")
+print("|---:|---:|---:|---:|---:|---:|---:|---:|---:|")
+for n in (1, 2):
+    o = ours[n]
+    key = "train_step_ms_1thread" if n == 1 else f"train_step_ms_{n}threads"
+    t = twin.get(key) if twin else None
+    ratio = f"{o['step_ms'] / t:.2f}" if t else "-"
+    print(f"| {n} | {o['step_ms']:.0f} | {o['data_ms']:.1f} | {o['forward_ms']:.0f} | "
+          f"{o['backward_ms']:.0f} | {o['optim_ms']:.0f} | {o['steps_per_s']:.3f} | "
+          f"{t if t else '-'} | {ratio} |")
+o = ours[2]
+print(f"\nloader alone: {o['loader_windows_per_s']:.0f} windows/s vs the trainer's "
+      f"{o['trainer_windows_per_s']:.1f} at 2 threads "
+      f"({o['loader_windows_per_s'] / o['trainer_windows_per_s']:.0f}×)")
+if twin:
+    print(f"twin: torch {twin['torch_version']}, {twin['params']} parameters")
+EOF

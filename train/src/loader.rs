@@ -1,0 +1,139 @@
+//! Batches prepared ahead of the optimiser step on a background thread.
+//!
+//! The loader thread owns a copy of the run's sampler (window or episode sampler, as it stood
+//! when the loop started) and draws, reads, augments and batches the next `depth` batches while
+//! the step runs; the training loop advances its own sampler (the one saved in checkpoints) in
+//! lockstep and checks that both drew the same windows. Reading a window is a function of the
+//! draw only (seeded augmentation), so the batches are the ones the loop would have made
+//! itself, and a resumed run still ends bit for bit where the uninterrupted one ends.
+
+use std::sync::Arc;
+use std::sync::mpsc::{Receiver, SyncSender, sync_channel};
+use std::thread::JoinHandle;
+use std::time::Instant;
+
+use burn::prelude::*;
+
+use crate::dataset::{ChunkSpan, EpisodeSampler, RunData, Sampler};
+use crate::error::{Result, TrainError};
+
+/// Which sampler draws the batches.
+#[derive(Clone, Debug)]
+pub enum Draw {
+    /// Independent windows ([`Sampler`]).
+    Windows(Sampler),
+    /// Consecutive chunks of whole episodes ([`EpisodeSampler`]).
+    Episodes(EpisodeSampler),
+}
+
+/// What one batch was drawn from: the (window, epoch) pairs or the episode chunks.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub enum DrawKey {
+    /// Window indices and their epochs.
+    Windows(Vec<(usize, u64)>),
+    /// Episode chunks.
+    Episodes(Vec<ChunkSpan>),
+}
+
+impl Draw {
+    /// Draws the next batch of `batch_size` windows (chunks of `window` frames).
+    pub fn next(&mut self, data: &RunData, batch_size: usize, window: usize) -> DrawKey {
+        match self {
+            Draw::Windows(s) => DrawKey::Windows(s.next_batch(batch_size)),
+            Draw::Episodes(e) => {
+                DrawKey::Episodes(e.next_batch(batch_size, window, |k| data.train.episode_len(k)))
+            }
+        }
+    }
+}
+
+/// One prepared batch.
+pub struct Prepared {
+    /// What it was drawn from.
+    pub key: DrawKey,
+    /// The model batch (`[B, T, …]`).
+    pub batch: model::WindowBatch,
+    /// Lanes that start an episode (`[B]`), episode sampling only.
+    pub fresh: Option<Tensor<1, Bool>>,
+    /// Seconds the loader spent making it.
+    pub prepare_s: f64,
+}
+
+/// Makes the batch of `key` from the training split on `device`.
+pub fn prepare(data: &RunData, key: DrawKey, device: &Device) -> Result<Prepared> {
+    let started = Instant::now();
+    let (batch, fresh) = match &key {
+        DrawKey::Windows(indices) => (data.batch(&data.train, indices, device)?, None),
+        DrawKey::Episodes(spans) => {
+            let (batch, fresh) = data.chunk_batch(spans, device)?;
+            (batch, Some(fresh))
+        }
+    };
+    Ok(Prepared {
+        key,
+        batch,
+        fresh,
+        prepare_s: started.elapsed().as_secs_f64(),
+    })
+}
+
+/// A background thread that keeps up to `depth` prepared batches ready.
+pub struct Prefetcher {
+    rx: Option<Receiver<Result<Prepared>>>,
+    handle: Option<JoinHandle<()>>,
+}
+
+impl Prefetcher {
+    /// Starts preparing `count` batches drawn by `draw` (a copy of the loop's sampler).
+    pub fn spawn(
+        data: Arc<RunData>,
+        mut draw: Draw,
+        batch_size: usize,
+        window: usize,
+        count: u64,
+        depth: usize,
+        device: Device,
+    ) -> Self {
+        let (tx, rx): (SyncSender<Result<Prepared>>, _) = sync_channel(depth.max(1));
+        let handle = std::thread::Builder::new()
+            .name("train-loader".into())
+            .spawn(move || {
+                for _ in 0..count {
+                    let key = draw.next(&data, batch_size, window);
+                    let item = prepare(&data, key, &device);
+                    let failed = item.is_err();
+                    // The receiver is gone when the loop stopped early (an error, stop_at).
+                    if tx.send(item).is_err() || failed {
+                        return;
+                    }
+                }
+            })
+            .expect("spawn the loader thread");
+        Prefetcher {
+            rx: Some(rx),
+            handle: Some(handle),
+        }
+    }
+
+    /// The next prepared batch; waits while the loader is still making it.
+    pub fn next(&self) -> Result<Prepared> {
+        self.rx
+            .as_ref()
+            .and_then(|rx| rx.recv().ok())
+            .unwrap_or_else(|| {
+                Err(TrainError::Other(
+                    "the data loader thread stopped before the last step".into(),
+                ))
+            })
+    }
+}
+
+impl Drop for Prefetcher {
+    fn drop(&mut self) {
+        // Hang up first so that a loader blocked on a full channel returns, then wait for it.
+        drop(self.rx.take());
+        if let Some(h) = self.handle.take() {
+            let _ = h.join();
+        }
+    }
+}
