@@ -369,3 +369,77 @@ fn bad_exec_noise_is_exit_2_and_writes_nothing() {
         assert!(!out.exists(), "{noise}: nothing written");
     }
 }
+
+/// `--workers N` records with N processes of `sim` (`--shard i/N` each): the same bytes as one
+/// process, every file; a directory of other parameters is refused by the parent before any
+/// process starts (exit 2, nothing recorded), and `--force` there empties it once.
+#[test]
+fn worker_processes_record_the_bytes_one_process_records() {
+    let record = |out: &std::path::Path, workers: &str, extra: &[&str]| {
+        let mut args = vec![
+            "generate",
+            "--task",
+            "t1",
+            "--episodes",
+            "3",
+            "--val",
+            "1",
+            "--seed",
+            "5",
+            "--size",
+            "32",
+            "--workers",
+            workers,
+            "--out",
+            out.to_str().unwrap(),
+        ];
+        args.extend(extra);
+        sim(&args)
+    };
+    let (one, two) = (tmp("workers-1"), tmp("workers-2"));
+    let (code, _, err) = record(&one, "1", &[]);
+    assert_eq!(code, 0, "{err}");
+    let (code, stdout, err) = record(&two, "2", &[]);
+    assert_eq!(code, 0, "{err}");
+    assert!(
+        stdout.contains("3 episodes") && stdout.contains("by 2 processes"),
+        "{stdout}"
+    );
+    let names = |d: &std::path::Path| {
+        let mut v: Vec<String> = std::fs::read_dir(d)
+            .unwrap()
+            .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+            .collect();
+        v.sort();
+        v
+    };
+    assert_eq!(names(&one), names(&two));
+    assert_eq!(names(&two).len(), 5, "{:?}", names(&two)); // 3 episodes, index, generation.json
+    for name in names(&one) {
+        assert_eq!(
+            std::fs::read(one.join(&name)).unwrap(),
+            std::fs::read(two.join(&name)).unwrap(),
+            "{name}"
+        );
+    }
+    // Another seed into the same folder: refused by the parent, nothing touched.
+    let before = std::fs::read(two.join("episode_00000.mcap")).unwrap();
+    let (code, _, err) = record(&two, "2", &["--seed", "6"]);
+    assert_eq!(code, 2, "{err}");
+    assert!(
+        err.contains("other parameters") && err.contains("--force"),
+        "{err}"
+    );
+    assert_eq!(
+        std::fs::read(two.join("episode_00000.mcap")).unwrap(),
+        before
+    );
+    // With --force: emptied once, recorded again by the processes.
+    let (code, _, err) = record(&two, "2", &["--seed", "6", "--force"]);
+    assert_eq!(code, 0, "{err}");
+    assert_ne!(
+        std::fs::read(two.join("episode_00000.mcap")).unwrap(),
+        before
+    );
+    assert_eq!(names(&two).len(), 5);
+}

@@ -1,8 +1,116 @@
 //! `sim generate`: scripted-expert demonstrations recorded as mcap episodes plus the dataset index.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
+use std::time::Duration;
 
 use super::BadInput;
+
+fn task_dir(tasks: &[sim::task::TaskSpec], out: &Path, t: &sim::task::TaskSpec) -> PathBuf {
+    if tasks.len() > 1 {
+        out.join(sim::generate::suite_folder(t))
+    } else {
+        out.to_path_buf()
+    }
+}
+
+/// Records every episode of `tasks` with `cfg.workers` processes of this program, process i the
+/// same command with `--shard i/N --workers 1` (one simulator and one GL context each: llvmpipe
+/// renders one frame at a time per process, so threads would queue for it). The directories are
+/// claimed here first (and emptied with `--force`); the progress bar counts finished episodes.
+fn record_in_processes(
+    tasks: &[sim::task::TaskSpec],
+    out: &Path,
+    cfg: &sim::generate::GenerateConfig,
+) -> anyhow::Result<()> {
+    let n = cfg.workers;
+    let dirs: Vec<PathBuf> = tasks.iter().map(|t| task_dir(tasks, out, t)).collect();
+    for (t, dir) in tasks.iter().zip(&dirs) {
+        sim::generate::prepare_dir(t, dir, cfg).map_err(|e| match e {
+            sim::generate::GenerateError::Argument(m) => anyhow::Error::new(BadInput(m)),
+            e if e.is_bad_input() => anyhow::Error::new(BadInput(e.to_string())),
+            other => other.into(),
+        })?;
+    }
+    let exe = std::env::current_exe()?;
+    // This command's arguments without --force (done above), then the shard's overrides.
+    let args: Vec<std::ffi::OsString> = std::env::args_os()
+        .skip(1)
+        .filter(|a| a != "--force")
+        .collect();
+    let logs = tempfile::tempdir()?;
+    let mut children: Vec<(Child, PathBuf)> = Vec::with_capacity(n);
+    for i in 0..n {
+        let log = logs.path().join(format!("shard_{i}.log"));
+        let file = std::fs::File::create(&log)?;
+        let child = Command::new(&exe)
+            .args(&args)
+            .args(["--workers", "1", "--shard", &format!("{i}/{n}")])
+            .stdin(Stdio::null())
+            .stdout(Stdio::null())
+            .stderr(file)
+            .spawn()?;
+        children.push((child, log));
+    }
+    let total = (tasks.len() * cfg.episodes) as u64;
+    let bar = indicatif::ProgressBar::new(total);
+    bar.set_style(
+        indicatif::ProgressStyle::with_template(
+            "{prefix} {bar:30} {pos}/{len} episodes  ETA {eta}",
+        )
+        .expect("valid template"),
+    );
+    bar.set_prefix(format!("{} processes", n));
+    let mut failed = None;
+    let mut running = n;
+    while running > 0 {
+        running = 0;
+        for (i, (child, log)) in children.iter_mut().enumerate() {
+            match child.try_wait()? {
+                None => running += 1,
+                Some(status) if !status.success() && failed.is_none() => {
+                    failed = Some((i, status.code(), log.clone()));
+                }
+                Some(_) => {}
+            }
+        }
+        if failed.is_some() {
+            break;
+        }
+        let done: usize = dirs
+            .iter()
+            .map(|d| {
+                (0..cfg.episodes)
+                    .filter(|&k| sim::generate::episode_path(d, k).exists())
+                    .count()
+            })
+            .sum();
+        bar.set_position(done as u64);
+        std::thread::sleep(Duration::from_millis(200));
+    }
+    if let Some((i, code, log)) = failed {
+        // One failed shard stops the others: their finished episodes stay for a rerun.
+        for (child, _) in &mut children {
+            let _ = child.kill();
+            let _ = child.wait();
+        }
+        bar.finish_and_clear();
+        let text = std::fs::read_to_string(&log).unwrap_or_default();
+        let last = text
+            .lines()
+            .rev()
+            .find(|l| !l.trim().is_empty())
+            .unwrap_or("");
+        let msg = format!("generation process {i}/{n} failed: {}", last.trim());
+        return Err(if code == Some(2) {
+            anyhow::Error::new(BadInput(msg))
+        } else {
+            anyhow::anyhow!(msg)
+        });
+    }
+    bar.finish_and_clear();
+    Ok(())
+}
 
 /// Generates `cfg.episodes` episodes (of which `cfg.val` validation) of `task` into `out`; for a suite
 /// (`libero_mem`, `libero_goal`, `all` or a comma list) that many of every task, one subfolder
@@ -13,13 +121,19 @@ pub fn run(task: String, out: PathBuf, cfg: sim::generate::GenerateConfig) -> an
     if tasks.is_empty() {
         return Err(BadInput(format!("--task `{task}` names no task")).into());
     }
+    let mut cfg = cfg;
+    let started = std::time::Instant::now();
+    let mut by_processes = None;
+    if cfg.workers > 1 && cfg.shard.is_whole() {
+        record_in_processes(&tasks, &out, &cfg)?;
+        by_processes = Some((cfg.workers, started.elapsed().as_secs_f64()));
+        // What is left: the indices, from the episodes the processes recorded.
+        cfg.workers = 1;
+        cfg.force = false;
+    }
 
     for t in &tasks {
-        let dir = if tasks.len() > 1 {
-            out.join(sim::generate::suite_folder(t))
-        } else {
-            out.clone()
-        };
+        let dir = task_dir(&tasks, &out, t);
         let bar = indicatif::ProgressBar::new(episodes as u64);
         bar.set_style(
             indicatif::ProgressStyle::with_template(
@@ -59,23 +173,28 @@ pub fn run(task: String, out: PathBuf, cfg: sim::generate::GenerateConfig) -> an
         let index = sim::generate::generate(t, &dir, &cfg, &on_progress).map_err(classify)?;
         bar.finish_and_clear();
         let steps: usize = index.episodes.iter().map(|e| e.length).sum();
+        let took = match by_processes {
+            Some((n, secs)) if tasks.len() == 1 => format!("in {secs:.1} s by {n} processes"),
+            Some((n, _)) => format!("by {n} processes"),
+            None => format!("in {:.1} s", start.elapsed().as_secs_f64()),
+        };
         data::outln!(
-            "{}: {} episodes ({} steps) in {} in {:.1} s",
+            "{}: {} episodes ({} steps) in {} {took}",
             t.id,
             index.episodes.len(),
             steps,
             dir.display(),
-            start.elapsed().as_secs_f64()
         );
     }
     if tasks.len() > 1 && cfg.shard.is_whole() {
         // Every task is recorded above: only the suite's index is left.
         let index = sim::generate::write_index(&out, &cfg)?;
         data::outln!(
-            "suite index: {} episodes of {} tasks in {}",
+            "suite index: {} episodes of {} tasks in {} ({:.1} s)",
             index.episodes.len(),
             tasks.len(),
-            out.display()
+            out.display(),
+            started.elapsed().as_secs_f64()
         );
     }
     Ok(())

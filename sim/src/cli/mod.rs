@@ -62,6 +62,7 @@ pub enum Command {
         action: AssetsCmd,
     },
     /// Record scripted-expert demonstrations as mcap episodes and write the dataset index.
+    #[command(args_override_self = true)]
     Generate {
         /// Task id, or a suite (`libero_mem`, `libero_goal`, `all`, a comma list: one subfolder per
         /// task under --out and one index over all of them).
@@ -79,7 +80,8 @@ pub enum Command {
         /// Output dataset folder.
         #[arg(long)]
         out: PathBuf,
-        /// Worker threads (one simulator each).
+        /// Worker processes (each one simulator and its own GL context, recording every N-th
+        /// episode: `--shard i/N` of the same command); the episodes are the same bytes whatever N.
         #[arg(long, default_value_t = 1)]
         workers: usize,
         /// Camera image side.

@@ -144,6 +144,18 @@ pub fn clean_temporaries(dir: &Path) -> Result<(), GenerateError> {
     Ok(())
 }
 
+/// Creates `dir` and claims it for `task` with `cfg`'s parameters (refused when it holds episodes
+/// of other parameters, unless `cfg.force`, which removes them); an unsharded `cfg` also removes
+/// the temporaries of killed runs. What every generation does first; a parent of several
+/// processes recording shards into `dir` does it once before starting them.
+pub fn prepare_dir(task: &TaskSpec, dir: &Path, cfg: &GenerateConfig) -> Result<(), GenerateError> {
+    std::fs::create_dir_all(dir).map_err(|e| data::DataError::io(dir, e))?;
+    if cfg.shard.is_whole() {
+        clean_temporaries(dir)?;
+    }
+    claim_dir(dir, &GenerationRecord::of(task, cfg), cfg.force)
+}
+
 /// Makes sure `dir` holds (or will hold) episodes of `want` only. A directory recorded with other
 /// parameters is refused, unless `force`, which removes its episodes and index first. A directory
 /// from before these records is checked on its first episode's task and seed.
@@ -466,11 +478,7 @@ pub fn generate_episodes(
             cfg.episodes, cfg.val, cfg.workers
         )));
     }
-    std::fs::create_dir_all(dir).map_err(|e| data::DataError::io(dir, e))?;
-    if cfg.shard.is_whole() {
-        clean_temporaries(dir)?;
-    }
-    claim_dir(dir, &GenerationRecord::of(task, cfg), cfg.force)?;
+    prepare_dir(task, dir, cfg)?;
     let items = cfg.shard.items(cfg.episodes);
     let progress = Mutex::new(GenerateProgress::default());
     let report = |f: &dyn Fn(&mut GenerateProgress)| {
