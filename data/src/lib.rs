@@ -45,6 +45,7 @@ pub mod imageio;
 pub mod index;
 pub mod lerobot;
 pub mod pool;
+pub mod procs;
 pub mod rlds;
 pub mod schema;
 pub mod shard;

@@ -53,7 +53,8 @@ impl PolicyKind {
     name = "eval",
     version,
     about = "Closed-loop evaluation with subgoal-completion and success tables",
-    args_conflicts_with_subcommands = true
+    args_conflicts_with_subcommands = true,
+    args_override_self = true
 )]
 struct Cli {
     #[command(subcommand)]
@@ -168,6 +169,11 @@ struct EvalArgs {
     /// Worker threads (one simulator and one policy each).
     #[arg(long, default_value_t = 1)]
     workers: usize,
+    /// With --workers N: N processes of eval instead of threads, each a shard (`--shard i/N`, its
+    /// results under OUT/processes/), merged into OUT at the end — every core renders (llvmpipe
+    /// draws one frame at a time per process); the same tables and recordings as one process.
+    #[arg(long)]
+    processes: bool,
     /// Camera image side rendered for the model (as recorded by `sim generate`) [default: 128;
     /// 256 with a `ws://` policy, the side openpi's LIBERO example renders before resizing to 224].
     #[arg(long)]
@@ -478,7 +484,18 @@ fn evaluate(args: &EvalArgs) -> anyhow::Result<()> {
     let s = setup(args)?;
     let tasks = eval::resolve_tasks(&s.tasks, args.repeat)?;
     let viz = args.viz.then(|| s.out.join("viz"));
-    let results = run_tasks(args, &s, &tasks, viz.clone())?;
+    let by_processes = args.processes && args.workers > 1 && args.shard.is_none();
+    if args.processes && args.viz {
+        return Err(EvalError::Argument(
+            "--viz draws the first rollout of one process: not with --processes".into(),
+        )
+        .into());
+    }
+    let results = if by_processes {
+        run_in_processes(args, &s, &tasks)?
+    } else {
+        run_tasks(args, &s, &tasks, viz.clone())?
+    };
     data::out!("{}", results.markdown());
     write_results(&s.out, &results)?;
     drop_journal(&s.out);
@@ -502,6 +519,69 @@ fn evaluate(args: &EvalArgs) -> anyhow::Result<()> {
         eprintln!("rollouts recorded under {}", r.display());
     }
     Ok(())
+}
+
+/// Evaluates with `args.workers` processes of this program, process i the same command with
+/// `--shard i/N --workers 1 --out OUT/processes/shard_i` (each keeps its own journal there, so a
+/// killed evaluation resumes), then merges their results as `eval merge` does. Recordings and
+/// videos go to the shared folders directly (each episode its own file).
+fn run_in_processes(
+    args: &EvalArgs,
+    s: &Setup,
+    tasks: &[sim::task::TaskSpec],
+) -> anyhow::Result<Results> {
+    let n = args.workers;
+    let root = s.out.join("processes");
+    let dirs: Vec<PathBuf> = (0..n).map(|i| root.join(format!("shard_{i}"))).collect();
+    let own = data::procs::own_args(&["--processes"]);
+    let shard_args = |i: usize| {
+        let mut a = own.clone();
+        a.extend(["--workers", "1", "--quiet", "--shard", &format!("{i}/{n}")].map(Into::into));
+        a.extend(["--out".into(), dirs[i].clone().into_os_string()]);
+        a
+    };
+    let total = (tasks.len() * args.episodes) as u64;
+    let bar = if args.quiet {
+        indicatif::ProgressBar::hidden()
+    } else {
+        indicatif::ProgressBar::new(total)
+    };
+    bar.set_style(
+        indicatif::ProgressStyle::with_template(
+            "{prefix} {bar:30} {pos}/{len} episodes  {elapsed} ETA {eta}",
+        )
+        .expect("valid template"),
+    );
+    bar.set_prefix(format!("{n} processes"));
+    // Finished episodes: the lines of each process's journal (gone once its results are written).
+    let count_done = || {
+        let done: usize = dirs
+            .iter()
+            .map(|d| {
+                if d.join("results.json").is_file() && !journal_path(d).exists() {
+                    return 0;
+                }
+                std::fs::read_to_string(journal_path(d)).map_or(0, |t| t.lines().count())
+            })
+            .sum();
+        bar.set_position(done as u64);
+    };
+    let ran = data::procs::run_all(n, &root, shard_args, count_done);
+    bar.finish_and_clear();
+    ran.map_err(|f| {
+        if f.is_bad_input() {
+            anyhow::Error::new(EvalError::Argument(f.to_string()))
+        } else {
+            anyhow::Error::new(f)
+        }
+    })?;
+    let parts = dirs
+        .iter()
+        .map(|d| Results::load(d))
+        .collect::<Result<Vec<_>, _>>()?;
+    let merged = report::merge(&parts)?;
+    let _ = std::fs::remove_dir_all(&root);
+    Ok(merged)
 }
 
 fn serve(

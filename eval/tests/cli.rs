@@ -352,18 +352,44 @@ fn sharded_expert_evaluation_merges_into_the_unsharded_files() {
         assert_eq!(code, 0, "{err}");
     };
     run(&["--out", &out("whole")]);
+    // Worker processes (each a shard, merged by the parent): the same files, their folder gone.
+    run(&["--workers", "2", "--processes", "--out", &out("procs")]);
+    assert!(!dir.path().join("procs/processes").exists());
     run(&["--shard", "0/2", "--out", &out("s0")]);
     run(&["--shard", "1/2", "--out", &out("s1")]);
     let (code, stdout, err) = eval(&["merge", &out("s1"), &out("s0"), "--out", &out("merged")]);
     assert_eq!(code, 0, "{err}");
     assert!(stdout.contains("| libero_mem/t3 | 3 |"), "{stdout}");
     for f in ["results.md", "results.json", "results.csv"] {
-        assert_eq!(
-            std::fs::read_to_string(dir.path().join("whole").join(f)).unwrap(),
-            std::fs::read_to_string(dir.path().join("merged").join(f)).unwrap(),
-            "{f}"
-        );
+        for other in ["merged", "procs"] {
+            assert_eq!(
+                std::fs::read_to_string(dir.path().join("whole").join(f)).unwrap(),
+                std::fs::read_to_string(dir.path().join(other).join(f)).unwrap(),
+                "{other}/{f}"
+            );
+        }
     }
+    // A worker process that fails on bad input: exit 2 from the parent, naming the process and
+    // the worker's own error, and no results.
+    let (code, _, err) = eval(&[
+        "--policy",
+        "ws://127.0.0.1:1",
+        "--tasks",
+        "t1",
+        "--episodes",
+        "2",
+        "--workers",
+        "2",
+        "--processes",
+        "--out",
+        &out("unreachable"),
+    ]);
+    assert_eq!(code, 2, "{err}");
+    assert!(
+        err.contains("worker process") && err.contains("127.0.0.1:1"),
+        "{err}"
+    );
+    assert!(!dir.path().join("unreachable/results.json").exists());
     let (code, _, err) = eval(&["merge", &out("s0"), "--out", &out("bad")]);
     assert_eq!(code, 2, "{err}");
     assert!(err.contains("shard 1/2 is missing"), "{err}");

@@ -1,8 +1,6 @@
 //! `sim generate`: scripted-expert demonstrations recorded as mcap episodes plus the dataset index.
 
 use std::path::{Path, PathBuf};
-use std::process::{Child, Command, Stdio};
-use std::time::Duration;
 
 use super::BadInput;
 
@@ -32,26 +30,9 @@ fn record_in_processes(
             other => other.into(),
         })?;
     }
-    let exe = std::env::current_exe()?;
     // This command's arguments without --force (done above), then the shard's overrides.
-    let args: Vec<std::ffi::OsString> = std::env::args_os()
-        .skip(1)
-        .filter(|a| a != "--force")
-        .collect();
+    let args = data::procs::own_args(&["--force"]);
     let logs = tempfile::tempdir()?;
-    let mut children: Vec<(Child, PathBuf)> = Vec::with_capacity(n);
-    for i in 0..n {
-        let log = logs.path().join(format!("shard_{i}.log"));
-        let file = std::fs::File::create(&log)?;
-        let child = Command::new(&exe)
-            .args(&args)
-            .args(["--workers", "1", "--shard", &format!("{i}/{n}")])
-            .stdin(Stdio::null())
-            .stdout(Stdio::null())
-            .stderr(file)
-            .spawn()?;
-        children.push((child, log));
-    }
     let total = (tasks.len() * cfg.episodes) as u64;
     let bar = indicatif::ProgressBar::new(total);
     bar.set_style(
@@ -60,23 +41,13 @@ fn record_in_processes(
         )
         .expect("valid template"),
     );
-    bar.set_prefix(format!("{} processes", n));
-    let mut failed = None;
-    let mut running = n;
-    while running > 0 {
-        running = 0;
-        for (i, (child, log)) in children.iter_mut().enumerate() {
-            match child.try_wait()? {
-                None => running += 1,
-                Some(status) if !status.success() && failed.is_none() => {
-                    failed = Some((i, status.code(), log.clone()));
-                }
-                Some(_) => {}
-            }
-        }
-        if failed.is_some() {
-            break;
-        }
+    bar.set_prefix(format!("{n} processes"));
+    let shard_args = |i: usize| {
+        let mut a = args.clone();
+        a.extend(["--workers", "1", "--shard", &format!("{i}/{n}")].map(Into::into));
+        a
+    };
+    let count_done = || {
         let done: usize = dirs
             .iter()
             .map(|d| {
@@ -86,30 +57,17 @@ fn record_in_processes(
             })
             .sum();
         bar.set_position(done as u64);
-        std::thread::sleep(Duration::from_millis(200));
-    }
-    if let Some((i, code, log)) = failed {
-        // One failed shard stops the others: their finished episodes stay for a rerun.
-        for (child, _) in &mut children {
-            let _ = child.kill();
-            let _ = child.wait();
-        }
-        bar.finish_and_clear();
-        let text = std::fs::read_to_string(&log).unwrap_or_default();
-        let last = text
-            .lines()
-            .rev()
-            .find(|l| !l.trim().is_empty())
-            .unwrap_or("");
-        let msg = format!("generation process {i}/{n} failed: {}", last.trim());
-        return Err(if code == Some(2) {
-            anyhow::Error::new(BadInput(msg))
-        } else {
-            anyhow::anyhow!(msg)
-        });
-    }
+    };
+    let ran = data::procs::run_all(n, logs.path(), shard_args, count_done);
     bar.finish_and_clear();
-    Ok(())
+    // One failed shard stops the others: their finished episodes stay for a rerun.
+    ran.map_err(|f| {
+        if f.is_bad_input() {
+            anyhow::Error::new(BadInput(f.to_string()))
+        } else {
+            anyhow::Error::new(f)
+        }
+    })
 }
 
 /// Generates `cfg.episodes` episodes (of which `cfg.val` validation) of `task` into `out`; for a suite
