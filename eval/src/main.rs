@@ -346,6 +346,22 @@ fn make_policy(s: &Setup) -> Result<Box<dyn Policy>, EvalError> {
     })
 }
 
+/// The progress bar of an evaluation of `total` episodes (hidden with `--quiet`).
+fn episodes_bar(quiet: bool, total: u64) -> indicatif::ProgressBar {
+    let bar = if quiet {
+        indicatif::ProgressBar::hidden()
+    } else {
+        indicatif::ProgressBar::new(total)
+    };
+    bar.set_style(
+        indicatif::ProgressStyle::with_template(
+            "{prefix} {bar:30} {pos}/{len} episodes  {msg}  {elapsed} ETA {eta}",
+        )
+        .expect("valid template"),
+    );
+    bar
+}
+
 fn run_tasks(
     args: &EvalArgs,
     s: &Setup,
@@ -386,17 +402,7 @@ fn run_tasks(
         ),
     };
     let total = (tasks.len() * cfg.shard.items(cfg.episodes).len()) as u64;
-    let bar = if args.quiet {
-        indicatif::ProgressBar::hidden()
-    } else {
-        indicatif::ProgressBar::new(total)
-    };
-    bar.set_style(
-        indicatif::ProgressStyle::with_template(
-            "{bar:30} {pos}/{len} episodes  {msg}  {elapsed} ETA {eta}",
-        )
-        .expect("valid template"),
-    );
+    let bar = episodes_bar(args.quiet, total);
     let make = || make_policy(s);
     let progress = |p: &eval::Progress| {
         bar.set_position(p.done as u64);
@@ -540,28 +546,21 @@ fn run_in_processes(
         a.extend(["--out".into(), dirs[i].clone().into_os_string()]);
         a
     };
-    let total = (tasks.len() * args.episodes) as u64;
-    let bar = if args.quiet {
-        indicatif::ProgressBar::hidden()
-    } else {
-        indicatif::ProgressBar::new(total)
-    };
-    bar.set_style(
-        indicatif::ProgressStyle::with_template(
-            "{prefix} {bar:30} {pos}/{len} episodes  {elapsed} ETA {eta}",
-        )
-        .expect("valid template"),
-    );
+    let bar = episodes_bar(args.quiet, (tasks.len() * args.episodes) as u64);
     bar.set_prefix(format!("{n} processes"));
-    // Finished episodes: the lines of each process's journal (gone once its results are written).
+    // Finished episodes: the lines of each process's journal, or all of its episodes once its
+    // results are written (the journal is gone then).
     let count_done = || {
         let done: usize = dirs
             .iter()
-            .map(|d| {
-                if d.join("results.json").is_file() && !journal_path(d).exists() {
-                    return 0;
+            .enumerate()
+            .map(|(i, d)| match std::fs::read_to_string(journal_path(d)) {
+                Ok(t) => t.lines().count(),
+                Err(_) if d.join("results.json").is_file() => {
+                    let shard = data::shard::Shard::new(i, n).unwrap_or_default();
+                    tasks.len() * shard.items(args.episodes).len()
                 }
-                std::fs::read_to_string(journal_path(d)).map_or(0, |t| t.lines().count())
+                Err(_) => 0,
             })
             .sum();
         bar.set_position(done as u64);

@@ -13,8 +13,8 @@ use std::time::Instant;
 
 use serde::{Deserialize, Serialize};
 
-use crate::config::{Config, Sampling};
-use crate::dataset::{EpisodeSampler, Sampler, ensure_dataset};
+use crate::config::Config;
+use crate::dataset::ensure_dataset;
 use crate::error::{Result, TrainError};
 use crate::loader::{self, Draw};
 use crate::trainer::{TrainOptions, open_data};
@@ -96,14 +96,7 @@ pub fn run(cfg: &Config, opts: &BenchOptions, progress: bool) -> Result<BenchRep
         use burn::module::Module;
         model::PolicyModel::new(&mcfg, &device)?.num_params()
     };
-    let mut draw = match cfg.train.sampling {
-        Sampling::Episodes => Draw::Episodes(EpisodeSampler::new(
-            cfg.train.seed,
-            data.train.num_episodes(),
-            cfg.train.stagger,
-        )),
-        Sampling::Windows => Draw::Windows(Sampler::new(cfg.train.seed, data.train.len())),
-    };
+    let mut draw = Draw::new(&cfg.train, &data);
     let batches = opts.loader_batches.max(1);
     let started = Instant::now();
     for _ in 0..batches {

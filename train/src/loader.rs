@@ -14,16 +14,18 @@ use std::time::Instant;
 
 use burn::prelude::*;
 
+use crate::config::{Sampling, TrainSection};
 use crate::dataset::{ChunkSpan, EpisodeSampler, RunData, Sampler};
 use crate::error::{Result, TrainError};
 
-/// Which sampler draws the batches.
+/// The samplers of a run, as the checkpoint's state holds them: with an episode sampler it
+/// draws the batches, else the window sampler does.
 #[derive(Clone, Debug)]
-pub enum Draw {
-    /// Independent windows ([`Sampler`]).
-    Windows(Sampler),
-    /// Consecutive chunks of whole episodes ([`EpisodeSampler`]).
-    Episodes(EpisodeSampler),
+pub struct Draw {
+    /// Independent windows.
+    pub windows: Sampler,
+    /// Consecutive chunks of whole episodes (episode sampling).
+    pub episodes: Option<EpisodeSampler>,
 }
 
 /// What one batch was drawn from: the (window, epoch) pairs or the episode chunks.
@@ -35,15 +37,42 @@ pub enum DrawKey {
     Episodes(Vec<ChunkSpan>),
 }
 
-impl Draw {
-    /// Draws the next batch of `batch_size` windows (chunks of `window` frames).
-    pub fn next(&mut self, data: &RunData, batch_size: usize, window: usize) -> DrawKey {
-        match self {
-            Draw::Windows(s) => DrawKey::Windows(s.next_batch(batch_size)),
-            Draw::Episodes(e) => {
-                DrawKey::Episodes(e.next_batch(batch_size, window, |k| data.train.episode_len(k)))
-            }
+/// Draws the next batch of `batch_size` windows (chunks of `window` frames): from `episodes`
+/// when the run samples episodes, else from `windows`.
+pub fn draw_next(
+    episodes: Option<&mut EpisodeSampler>,
+    windows: &mut Sampler,
+    data: &RunData,
+    batch_size: usize,
+    window: usize,
+) -> DrawKey {
+    match episodes {
+        Some(e) => {
+            DrawKey::Episodes(e.next_batch(batch_size, window, |k| data.train.episode_len(k)))
         }
+        None => DrawKey::Windows(windows.next_batch(batch_size)),
+    }
+}
+
+impl Draw {
+    /// The samplers of a new run of `train` over `data`'s training split.
+    pub fn new(train: &TrainSection, data: &RunData) -> Self {
+        Draw {
+            windows: Sampler::new(train.seed, data.train.len()),
+            episodes: (train.sampling == Sampling::Episodes)
+                .then(|| EpisodeSampler::new(train.seed, data.train.num_episodes(), train.stagger)),
+        }
+    }
+
+    /// Draws the next batch ([`draw_next`]).
+    pub fn next(&mut self, data: &RunData, batch_size: usize, window: usize) -> DrawKey {
+        draw_next(
+            self.episodes.as_mut(),
+            &mut self.windows,
+            data,
+            batch_size,
+            window,
+        )
     }
 }
 

@@ -25,9 +25,9 @@ use serde::{Deserialize, Serialize};
 use crate::checkpoint::{self, STATE_FORMAT, TrainState};
 use crate::clip::clip_global_norm;
 use crate::config::{BackendKind, Config, ObsMode, Sampling};
-use crate::dataset::{EpisodeSampler, RunData, Sampler, ensure_dataset};
+use crate::dataset::{RunData, ensure_dataset};
 use crate::error::{Result, TrainError};
-use crate::loader::{self, Draw, DrawKey, Prefetcher};
+use crate::loader::{self, Draw, Prefetcher};
 use crate::metrics::{self, JsonlWriter, Record};
 use crate::plot;
 use crate::schedule::WarmupCosine;
@@ -377,12 +377,12 @@ pub fn train(cfg: &Config, opts: &TrainOptions) -> Result<TrainSummary> {
         None => {
             ad.seed(t.seed);
             let model = PolicyModel::new(&mcfg, &ad)?;
+            let fresh = Draw::new(&t, &data);
             let state = TrainState {
                 format: STATE_FORMAT.into(),
                 step: 0,
-                sampler: Sampler::new(t.seed, data.train.len()),
-                episodes: (t.sampling == Sampling::Episodes)
-                    .then(|| EpisodeSampler::new(t.seed, episodes, t.stagger)),
+                sampler: fresh.windows,
+                episodes: fresh.episodes,
                 rng_seed: t.seed,
                 elapsed_s: 0.0,
                 model: mcfg.clone(),
@@ -431,9 +431,9 @@ pub fn train(cfg: &Config, opts: &TrainOptions) -> Result<TrainSummary> {
     let mut last_val_step = None;
     let val_due = |step: u64| t.val_every > 0 && step.is_multiple_of(t.val_every);
     // The loader thread draws from a copy of the sampler; the loop advances the saved one.
-    let draw = match &state.episodes {
-        Some(lanes) => Draw::Episodes(lanes.clone()),
-        None => Draw::Windows(state.sampler.clone()),
+    let draw = Draw {
+        windows: state.sampler.clone(),
+        episodes: state.episodes.clone(),
     };
     let prefetch = (!opts.no_prefetch && end > state.step).then(|| {
         Prefetcher::spawn(
@@ -448,23 +448,28 @@ pub fn train(cfg: &Config, opts: &TrainOptions) -> Result<TrainSummary> {
     });
     while state.step < end {
         let data_started = Instant::now();
-        let key = match state.episodes.as_mut() {
-            // Consecutive chunks of whole episodes: the memory of the previous chunk goes on.
-            Some(lanes) => DrawKey::Episodes(
-                lanes.next_batch(t.batch_size, window, |k| data.train.episode_len(k)),
-            ),
-            None => DrawKey::Windows(state.sampler.next_batch(t.batch_size)),
-        };
+        // With episode sampling, consecutive chunks of whole episodes: the memory of the
+        // previous chunk goes on.
+        let key = loader::draw_next(
+            state.episodes.as_mut(),
+            &mut state.sampler,
+            &data,
+            t.batch_size,
+            window,
+        );
         let prepared = match &prefetch {
-            Some(p) => p.next()?,
-            None => loader::prepare(&data, key.clone(), &ad)?,
+            Some(p) => {
+                let prepared = p.next()?;
+                if prepared.key != key {
+                    return Err(TrainError::Other(format!(
+                        "step {}: the loader drew other windows than the sampler",
+                        state.step + 1
+                    )));
+                }
+                prepared
+            }
+            None => loader::prepare(&data, key, &ad)?,
         };
-        if prepared.key != key {
-            return Err(TrainError::Other(format!(
-                "step {}: the loader drew other windows than the sampler",
-                state.step + 1
-            )));
-        }
         let carry_in = match prepared.fresh {
             Some(fresh) if !carry.is_empty() => carry.clone().with_fresh(fresh),
             _ => Carry::default(),

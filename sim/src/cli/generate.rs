@@ -12,6 +12,19 @@ fn task_dir(tasks: &[sim::task::TaskSpec], out: &Path, t: &sim::task::TaskSpec) 
     }
 }
 
+/// The progress bar of `total` episodes, `prefix` before it.
+fn episodes_bar(total: u64, prefix: String) -> indicatif::ProgressBar {
+    let bar = indicatif::ProgressBar::new(total);
+    bar.set_style(
+        indicatif::ProgressStyle::with_template(
+            "{prefix} {bar:30} {pos}/{len} episodes  {msg}  ETA {eta}",
+        )
+        .expect("valid template"),
+    );
+    bar.set_prefix(prefix);
+    bar
+}
+
 /// Records every episode of `tasks` with `cfg.workers` processes of this program, process i the
 /// same command with `--shard i/N --workers 1` (one simulator and one GL context each: llvmpipe
 /// renders one frame at a time per process, so threads would queue for it). The directories are
@@ -34,14 +47,7 @@ fn record_in_processes(
     let args = data::procs::own_args(&["--force"]);
     let logs = tempfile::tempdir()?;
     let total = (tasks.len() * cfg.episodes) as u64;
-    let bar = indicatif::ProgressBar::new(total);
-    bar.set_style(
-        indicatif::ProgressStyle::with_template(
-            "{prefix} {bar:30} {pos}/{len} episodes  ETA {eta}",
-        )
-        .expect("valid template"),
-    );
-    bar.set_prefix(format!("{n} processes"));
+    let bar = episodes_bar(total, format!("{n} processes"));
     let shard_args = |i: usize| {
         let mut a = args.clone();
         a.extend(["--workers", "1", "--shard", &format!("{i}/{n}")].map(Into::into));
@@ -92,14 +98,7 @@ pub fn run(task: String, out: PathBuf, cfg: sim::generate::GenerateConfig) -> an
 
     for t in &tasks {
         let dir = task_dir(&tasks, &out, t);
-        let bar = indicatif::ProgressBar::new(episodes as u64);
-        bar.set_style(
-            indicatif::ProgressStyle::with_template(
-                "{prefix} {bar:30} {pos}/{len} episodes  {msg}  ETA {eta}",
-            )
-            .expect("valid template"),
-        );
-        bar.set_prefix(t.id.clone());
+        let bar = episodes_bar(episodes as u64, t.id.clone());
         let start = std::time::Instant::now();
         let on_progress = |p: sim::generate::GenerateProgress| {
             bar.set_position(p.done as u64);
