@@ -1513,6 +1513,7 @@ pub fn import(root: &Path, out: &Path, opts: &ImportOptions) -> Result<ImportRep
                     pose: (pose.len() >= (i + 1) * 7)
                         .then(|| std::array::from_fn(|d| at(&pose, d, 7))),
                     grasped: (grasped.len() > i).then(|| at(&grasped, 0, 1) > 0.5),
+                    parts: Vec::new(),
                 });
             }
             let int = |name: &str| get(name).and_then(|v| v.first().copied()).unwrap_or(0.0) as u32;

@@ -401,6 +401,7 @@ pub fn parse_reasoning(text: &str, width: u32, height: u32) -> Option<Vec<Object
             subgoal_label: if label.is_empty() { "0".into() } else { label },
             pose: None,
             grasped: None,
+            parts: Vec::new(),
         });
     }
     Some(out)

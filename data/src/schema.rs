@@ -6,10 +6,15 @@ use std::collections::BTreeMap;
 use serde::{Deserialize, Serialize};
 
 /// Version tag stored in every episode's metadata (version 2 adds object poses and grasp flags
-/// to the object annotations).
-pub const SCHEMA_VERSION: &str = "libero-mem-rs/episode/2";
-/// Versions this reader understands; files of version 1 read with no object poses.
-pub const READABLE_VERSIONS: [&str; 2] = ["libero-mem-rs/episode/1", SCHEMA_VERSION];
+/// to the object annotations, version 3 the poses of their articulated parts).
+pub const SCHEMA_VERSION: &str = "libero-mem-rs/episode/3";
+/// Versions this reader understands; files of version 1 read with no object poses, files of
+/// version 2 with no parts.
+pub const READABLE_VERSIONS: [&str; 3] = [
+    "libero-mem-rs/episode/1",
+    "libero-mem-rs/episode/2",
+    SCHEMA_VERSION,
+];
 /// Name of the mcap metadata record holding [`EpisodeMeta`].
 pub const METADATA_NAME: &str = "episode";
 
@@ -134,6 +139,22 @@ pub struct ObjectAnnotation {
     /// Whether both gripper fingers touch the object at this step (schema 2).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub grasped: Option<bool>,
+    /// The object's articulated parts (a cabinet's drawer handles, a stove's knob) at this step
+    /// (schema 3; empty for rigid objects, in older files and in imported data).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub parts: Vec<PartState>,
+}
+
+/// Privileged state of one articulated part of an object (schema 3).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct PartState {
+    /// Part name within its object's category (e.g. `middle_handle`, `knob`).
+    pub name: String,
+    /// World position (m) of the point a gripper takes the part by, and the orientation
+    /// quaternion (w, x, y, z) of the part's body.
+    pub pose: [f32; 7],
+    /// Position of the part's joint (m for a slide, rad for a hinge).
+    pub joint: f32,
 }
 
 /// Goal progress at one step.
@@ -337,7 +358,7 @@ pub fn json_schema(name: &str) -> Option<&'static str> {
             r#"{"$schema":"https://json-schema.org/draft/2020-12/schema","title":"lmr.Action","description":"Action: delta position (3), delta axis-angle (3), gripper (-1 open, +1 close)","type":"object","properties":{"step":{"type":"integer"},"action":{"type":"array","items":{"type":"number"},"minItems":7,"maxItems":7}},"required":["step","action"]}"#
         }
         SCHEMA_OBJECTS => {
-            r#"{"$schema":"https://json-schema.org/draft/2020-12/schema","title":"lmr.ObjectAnnotations","type":"object","properties":{"step":{"type":"integer"},"objects":{"type":"array","items":{"type":"object","properties":{"instance_id":{"type":"integer"},"name":{"type":"string"},"box":{"description":"x, y, w, h normalised to [0,1] in the upright agentview image","type":"array","items":{"type":"number"},"minItems":4,"maxItems":4},"visible":{"type":"boolean"},"subgoal_label":{"type":"string"},"pose":{"description":"world position (m) and quaternion w, x, y, z of the object's root body","type":"array","items":{"type":"number"},"minItems":7,"maxItems":7},"grasped":{"description":"both gripper fingers touch the object","type":"boolean"}},"required":["instance_id","name","box","visible","subgoal_label"]}}},"required":["step","objects"]}"#
+            r#"{"$schema":"https://json-schema.org/draft/2020-12/schema","title":"lmr.ObjectAnnotations","type":"object","properties":{"step":{"type":"integer"},"objects":{"type":"array","items":{"type":"object","properties":{"instance_id":{"type":"integer"},"name":{"type":"string"},"box":{"description":"x, y, w, h normalised to [0,1] in the upright agentview image","type":"array","items":{"type":"number"},"minItems":4,"maxItems":4},"visible":{"type":"boolean"},"subgoal_label":{"type":"string"},"pose":{"description":"world position (m) and quaternion w, x, y, z of the object's root body","type":"array","items":{"type":"number"},"minItems":7,"maxItems":7},"grasped":{"description":"both gripper fingers touch the object","type":"boolean"},"parts":{"description":"articulated parts: grasp point and body orientation, joint position","type":"array","items":{"type":"object","properties":{"name":{"type":"string"},"pose":{"type":"array","items":{"type":"number"},"minItems":7,"maxItems":7},"joint":{"type":"number"}},"required":["name","pose","joint"]}}},"required":["instance_id","name","box","visible","subgoal_label"]}}},"required":["step","objects"]}"#
         }
         SCHEMA_GOAL => {
             r#"{"$schema":"https://json-schema.org/draft/2020-12/schema","title":"lmr.GoalProgress","type":"object","properties":{"step":{"type":"integer"},"satisfied":{"type":"integer"},"total":{"type":"integer"},"satisfied_subgoals":{"type":"array","items":{"type":"string"}},"current_subgoal":{"type":"string"}},"required":["step","satisfied","total","satisfied_subgoals","current_subgoal"]}"#

@@ -132,6 +132,7 @@ pub fn synthetic_steps(len: usize, seed: u64, o: &SynthOptions) -> Vec<StepRecor
                         },
                         pose: Some([0.1, 0.01 * k as f32, 0.9, 1.0, 0.0, 0.0, 0.0]),
                         grasped: Some(k % 5 == 2),
+                        parts: Vec::new(),
                     },
                     ObjectAnnotation {
                         instance_id: 20,
@@ -141,6 +142,7 @@ pub fn synthetic_steps(len: usize, seed: u64, o: &SynthOptions) -> Vec<StepRecor
                         subgoal_label: "0".into(),
                         pose: None,
                         grasped: None,
+                        parts: Vec::new(),
                     },
                 ],
                 progress: GoalProgress {

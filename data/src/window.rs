@@ -753,6 +753,7 @@ mod tests {
             subgoal_label: "0".into(),
             pose: None,
             grasped: None,
+            parts: Vec::new(),
         };
         let unseen = ObjectAnnotation {
             bbox: [0.0; 4],

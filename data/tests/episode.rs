@@ -299,18 +299,24 @@ fn same_steps_give_identical_files() {
     assert_eq!(synthetic_steps(12, 11, &SynthOptions::default()), steps);
 }
 
-/// Schema 2 added object poses and grasp flags; version-1 metadata and annotations without them
-/// still read, other versions are refused naming both readable ones.
+/// Schema 2 added object poses and grasp flags, schema 3 articulated parts; version-1 and -2
+/// metadata and annotations without them still read, other versions are refused naming the
+/// readable ones.
 #[test]
 fn schema_version_1_still_reads_and_others_are_refused() {
     let mut m = EpisodeMeta::default().to_map();
-    assert_eq!(m["schema_version"], "libero-mem-rs/episode/2");
-    m.insert("schema_version".into(), "libero-mem-rs/episode/1".into());
-    assert!(EpisodeMeta::from_map(&m).is_ok());
-    m.insert("schema_version".into(), "libero-mem-rs/episode/3".into());
+    assert_eq!(m["schema_version"], "libero-mem-rs/episode/3");
+    for old in ["libero-mem-rs/episode/1", "libero-mem-rs/episode/2"] {
+        m.insert("schema_version".into(), old.into());
+        assert!(EpisodeMeta::from_map(&m).is_ok());
+    }
+    m.insert("schema_version".into(), "libero-mem-rs/episode/4".into());
     let e = EpisodeMeta::from_map(&m).unwrap_err();
     assert!(
-        e.contains("episode/3") && e.contains("episode/1") && e.contains("episode/2"),
+        e.contains("episode/4")
+            && e.contains("episode/1")
+            && e.contains("episode/2")
+            && e.contains("episode/3"),
         "{e}"
     );
     let v1: ObjectAnnotation = serde_json::from_str(
@@ -321,6 +327,7 @@ fn schema_version_1_still_reads_and_others_are_refused() {
     let v2 = ObjectAnnotation {
         pose: Some([0.1, 0.2, 0.9, 1.0, 0.0, 0.0, 0.0]),
         grasped: Some(true),
+        parts: Vec::new(),
         ..v1.clone()
     };
     let back: ObjectAnnotation =
@@ -330,4 +337,21 @@ fn schema_version_1_still_reads_and_others_are_refused() {
         !serde_json::to_string(&v1).unwrap().contains("pose"),
         "absent fields are not written"
     );
+    assert!(!serde_json::to_string(&v2).unwrap().contains("parts"));
+    let v3 = ObjectAnnotation {
+        parts: vec![PartState {
+            name: "knob".into(),
+            pose: [0.1, 0.2, 0.95, 0.9, 0.0, 0.0, 0.43],
+            joint: 0.75,
+        }],
+        ..v2.clone()
+    };
+    let json = serde_json::to_string(&v3).unwrap();
+    assert!(
+        json.contains(
+            r#""parts":[{"name":"knob","pose":[0.1,0.2,0.95,0.9,0.0,0.0,0.43],"joint":0.75}]"#
+        ),
+        "{json}"
+    );
+    assert_eq!(serde_json::from_str::<ObjectAnnotation>(&json).unwrap(), v3);
 }

@@ -60,7 +60,7 @@ def check(path: Path) -> list[str]:
             return errors + ["no `episode` metadata"]
         ep = meta["episode"]
         fps = float(ep["fps"])
-        if ep.get("schema_version") not in ("libero-mem-rs/episode/1", "libero-mem-rs/episode/2"):
+        if ep.get("schema_version") not in ("libero-mem-rs/episode/1", "libero-mem-rs/episode/2", "libero-mem-rs/episode/3"):
             errors.append(f"schema_version {ep.get('schema_version')!r}")
         topics = {}
         for cid, ch in summary.channels.items():

@@ -32,5 +32,5 @@ pub mod world;
 pub use collect::{aliasing, generate, labels, record};
 pub use engine::{mujoco, render};
 pub use tools::{bench, sheet};
-pub use world::env::{Env, EnvConfig, EnvError, GoalStatus, ObjectState, Observation};
+pub use world::env::{Env, EnvConfig, EnvError, GoalStatus, ObjectState, Observation, PartPose};
 pub use world::{assets, controller, env, predicates, robot, scene};

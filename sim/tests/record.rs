@@ -141,6 +141,77 @@ fn recorded_poses_track_the_objects_and_the_grasp() {
     );
 }
 
+/// Schema 3: the cabinet's drawers and the stove's knob are recorded as parts, and the expert's
+/// pull shows in the middle handle's place and joint (and nowhere else).
+#[test]
+fn drawer_parts_follow_the_pull() {
+    let task = registry::resolve("libero_goal/open_the_middle_drawer_of_the_cabinet").unwrap();
+    let cfg = EnvConfig {
+        image_size: 32,
+        segmentation: true,
+        ..EnvConfig::default()
+    };
+    let mut env = Env::from_task(&task, cfg).unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("ep.mcap");
+    assert!(
+        sim::generate::record_episode(
+            &mut env,
+            &task,
+            0,
+            &path,
+            Default::default(),
+            &Default::default(),
+            false,
+        )
+        .unwrap(),
+        "the expert opens the drawer at seed 0"
+    );
+    let reader = data::EpisodeReader::open(&path).unwrap();
+    let (first, last) = (
+        reader.read_step(0).unwrap(),
+        reader.read_step(reader.len() - 1).unwrap(),
+    );
+    let parts = |st: &data::StepRecord, name: &str| -> Vec<data::PartState> {
+        st.objects
+            .iter()
+            .find(|o| o.name == name)
+            .unwrap_or_else(|| panic!("{name} in the scene"))
+            .parts
+            .clone()
+    };
+    let names = |p: &[data::PartState]| p.iter().map(|p| p.name.clone()).collect::<Vec<_>>();
+    let (c0, c1) = (
+        parts(&first, "wooden_cabinet_1"),
+        parts(&last, "wooden_cabinet_1"),
+    );
+    assert_eq!(names(&c0), ["top_handle", "middle_handle", "bottom_handle"]);
+    assert_eq!(names(&parts(&first, "flat_stove_1")), ["knob"]);
+    assert!(
+        parts(&first, "akita_black_bowl_1").is_empty(),
+        "a bowl has no parts"
+    );
+    // Closed at the start, the handles stacked 7 cm apart in front of the cabinet.
+    assert!(c0.iter().all(|p| p.joint.abs() < 1e-3), "{c0:?}");
+    assert!(
+        (c0[0].pose[2] - c0[1].pose[2] - 0.0687).abs() < 2e-3,
+        "{c0:?}"
+    );
+    // The middle drawer comes out by more than the 14 cm `Open` needs; its handle moves as much.
+    assert!(c1[1].joint < -0.14, "{:?}", c1[1]);
+    let moved = |a: &data::PartState, b: &data::PartState| {
+        (0..3)
+            .map(|d| (a.pose[d] - b.pose[d]).powi(2))
+            .sum::<f32>()
+            .sqrt()
+    };
+    assert!((moved(&c0[1], &c1[1]) - c1[1].joint.abs()).abs() < 0.01);
+    assert!(
+        c1[0].joint.abs() < 0.01 && c1[2].joint.abs() < 0.01,
+        "{c1:?}"
+    );
+}
+
 #[test]
 fn recording_needs_segmentation() {
     let task = registry::resolve("t1").unwrap();

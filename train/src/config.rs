@@ -178,6 +178,11 @@ pub struct ModelSection {
     /// false leaves the gripper command to be read from the scene, not copied from the fingers).
     #[serde(default = "yes", skip_serializing_if = "is_yes")]
     pub state_fingers: bool,
+    /// State mode: one more token per articulated part of an object — a drawer's handle, a
+    /// stove's knob: where it is taken and its joint's position (default false; needs episodes
+    /// of schema 3, see `data/SCHEMA.md`).
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub state_parts: bool,
     /// Size preset.
     #[serde(default = "tiny")]
     pub preset: Preset,
@@ -389,6 +394,9 @@ impl Config {
         }
         if !self.model.state_fingers && self.model.obs != ObsMode::State {
             return Err("model.state_fingers: only state mode (`obs = \"state\"`) reads it".into());
+        }
+        if self.model.state_parts && self.model.obs != ObsMode::State {
+            return Err("model.state_parts: only state mode (`obs = \"state\"`) reads it".into());
         }
         if let Some(s) = model::io::state::bad_relative_scale(rel) {
             return Err(format!(
@@ -747,6 +755,16 @@ variant = "e_slotssm"
         assert!(
             e.to_string()
                 .contains("model.state_fingers: only state mode"),
+            "{e}"
+        );
+        let c =
+            Config::load_with(&p, &sets(&["model.obs=state", "model.state_parts=true"])).unwrap();
+        assert!(c.model.state_parts && c.to_toml().contains("state_parts = true"));
+        let c = Config::load_with(&p, &sets(&["model.obs=state"])).unwrap();
+        assert!(!c.model.state_parts && !c.to_toml().contains("state_parts"));
+        let e = Config::load_with(&p, &sets(&["model.state_parts=true"])).unwrap_err();
+        assert!(
+            e.to_string().contains("model.state_parts: only state mode"),
             "{e}"
         );
         let e = Config::load_with(&p, &sets(&["model.state_relative_cm=[2]"])).unwrap_err();

@@ -416,11 +416,18 @@ impl EpisodeSampler {
 /// every 4th frame of the training episodes. Every episode must have been recorded with object
 /// poses (episode schema 2); the first that was not is named in the error. `relative_cm`: the
 /// scales of the squashed object − gripper features (`[model].state_relative_cm`); `fingers`:
-/// whether the robot token carries the finger joints (`[model].state_fingers`).
-pub fn state_spec(data: &OpenedDataset, relative_cm: &[f32], fingers: bool) -> Result<StateSpec> {
+/// whether the robot token carries the finger joints (`[model].state_fingers`); `parts`: whether
+/// articulated parts are tokens (`[model].state_parts`; an error when no episode records any).
+pub fn state_spec(
+    data: &OpenedDataset,
+    relative_cm: &[f32],
+    fingers: bool,
+    parts: bool,
+) -> Result<StateSpec> {
     let new_stats = || {
         let s = StateStats::new(relative_cm);
-        if fingers { s } else { s.without_fingers() }
+        let s = if fingers { s } else { s.without_fingers() };
+        if parts { s.with_parts() } else { s }
     };
     use rayon::prelude::*;
     let stats = data
@@ -457,7 +464,17 @@ pub fn state_spec(data: &OpenedDataset, relative_cm: &[f32], fingers: bool) -> R
     for s in &stats {
         all.merge(s);
     }
-    Ok(all.finish())
+    let spec = all.finish();
+    if parts && !spec.categories.iter().any(|c| c.contains('/')) {
+        return Err(TrainError::Usage(format!(
+            "{}: `state_parts = true` needs the articulated parts of objects in /objects (episode \
+             schema 3), and no episode records any (recorded before schema 3, or no scene has a \
+             drawer, knob or door: re-generate it with this version's `sim generate`, or drop \
+             state_parts)",
+            data.dir.display()
+        )));
+    }
+    Ok(spec)
 }
 
 /// Checks that every episode of the dataset records its goal progress (`/goal` with a known

@@ -254,6 +254,7 @@ pub fn open_data(cfg: &Config) -> Result<(ModelConfig, RunData)> {
                 &opened,
                 &cfg.model.state_relative_cm,
                 cfg.model.state_fingers,
+                cfg.model.state_parts,
             )?;
             mcfg = mcfg.with_state(spec.tokens(), spec.num_categories(), spec.features());
             mcfg.validate()

@@ -518,6 +518,42 @@ fn state_mode_on_data_without_poses_and_oracle_without_goal_exit_2() {
         e.to_string().contains("/goal") && e.to_string().contains("synth_000.mcap"),
         "{e}"
     );
+    // Articulated parts asked of episodes that record poses but no parts (schema 2, or scenes
+    // without drawers and knobs): one error naming the dataset and the key.
+    let posed = dir.path().join("posed");
+    std::fs::create_dir_all(&posed).unwrap();
+    for e in &index.episodes {
+        let r = data::EpisodeReader::open(dataset().join(&e.file)).unwrap();
+        let mut w = data::EpisodeWriter::create(
+            posed.join(&e.file),
+            r.meta().clone(),
+            data::WriterOptions::default(),
+        )
+        .unwrap();
+        for t in 0..r.len() {
+            let mut step = r.read_step(t).unwrap();
+            for o in &mut step.objects {
+                o.pose.get_or_insert([0.1, 0.0, 0.9, 1.0, 0.0, 0.0, 0.0]);
+            }
+            w.write_step(&step).unwrap();
+        }
+        w.finish().unwrap();
+    }
+    data::build_index(&posed, &opts_idx).unwrap();
+    let mut cfg = short_config(2, 2);
+    cfg.data.dir = posed.clone();
+    cfg.model.obs = train::config::ObsMode::State;
+    let mut parts = cfg.clone();
+    parts.model.state_parts = true;
+    let e = train::train(&parts, &opts(&dir.path().join("run3"))).unwrap_err();
+    assert_eq!(e.exit_code(), 2);
+    assert!(
+        e.to_string().contains("state_parts") && e.to_string().contains("posed"),
+        "{e}"
+    );
+    assert!(!dir.path().join("run3").join("model.json").exists());
+    // The same episodes train in state mode without parts.
+    train::train(&cfg, &opts(&dir.path().join("run4"))).unwrap();
 }
 
 /// Bits of every float parameter inside the modules named `part` (anywhere in the model tree,

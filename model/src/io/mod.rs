@@ -316,7 +316,7 @@ impl Processor {
             self.config.state.as_ref().ok_or_else(|| {
                 ModelError::Input("the processor has no object-state spec".into())
             })?;
-        let order = state::order(seed, objects.len());
+        let order = state::order(seed, spec.object_tokens(objects));
         state::tokens(spec, objects, proprio, Self::robot_label(goal), &order)
     }
 
@@ -718,6 +718,7 @@ pub(crate) mod tests {
             subgoal_label: label.into(),
             pose: None,
             grasped: None,
+            parts: Vec::new(),
         };
         let objects = [
             object("bowl on plate", [0.25, 0.5, 0.125, 0.25], true),

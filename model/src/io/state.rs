@@ -8,6 +8,10 @@
 //! - object: position ×10 (decimetres, world frame), position − gripper position ×10, the first
 //!   two columns of its rotation matrix (the continuous 6-D rotation representation: where an
 //!   object's rim or handle lies is linear in them, and not in a quaternion), grasped (0/1), 0, 0;
+//! - articulated part (with [`StateSpec::parts`]: a drawer's handle, a stove's knob, one token
+//!   each after its object's, category `<object category>/<part>`): the same numbers for the point
+//!   the part is taken by and its body's orientation, its object's grasp flag, then the joint
+//!   position (a drawer's opening in m, a knob's turn in rad), 0;
 //! - robot: gripper position ×10, three zeros, the first two columns of the gripper's rotation
 //!   matrix, 0, then the two finger joint positions ×10 (zeros when the spec leaves the fingers
 //!   out, [`StateSpec::fingers`]);
@@ -67,6 +71,11 @@ pub struct StateSpec {
     /// policy can learn to copy them and then never starts a close on its own.
     #[serde(default = "yes", skip_serializing_if = "is_yes")]
     pub fingers: bool,
+    /// Whether each articulated part of an object (episode schema 3) is a token of its own:
+    /// without them a drawer's opening and a knob's turn are not observed at all, and a handle's
+    /// place is a fixed offset from the cabinet's origin that the model has to learn to rotate.
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub parts: bool,
     /// Mean and standard deviation of each feature of object tokens.
     pub object_norm: [Vec<f32>; 2],
     /// Mean and standard deviation of each feature of the robot token.
@@ -88,6 +97,7 @@ pub struct StateStats {
     max_objects: usize,
     relative_cm: Vec<f32>,
     fingers: bool,
+    parts: bool,
     /// Count, sum and sum of squares per feature.
     objects: [Vec<f64>; 3],
     robot: [Vec<f64>; 3],
@@ -125,6 +135,7 @@ impl StateStats {
             max_objects: 0,
             relative_cm: relative_cm.to_vec(),
             fingers: true,
+            parts: false,
             objects: zeros(),
             robot: zeros(),
         }
@@ -137,22 +148,31 @@ impl StateStats {
         self
     }
 
+    /// The same statistics for tokens that include every articulated part of an object
+    /// ([`StateSpec::parts`]).
+    pub fn with_parts(mut self) -> Self {
+        self.parts = true;
+        self
+    }
+
     /// Adds one frame: the objects in scene order (with poses) and the robot's proprio state.
     pub fn add(&mut self, objects: &[ObjectAnnotation], state: &[f32; 8]) -> Result<()> {
-        for o in objects {
-            if !self.names.contains(&o.name) {
-                self.names.push(o.name.clone());
+        let sources = sources(self.parts, objects);
+        for s in &sources {
+            if !self.names.contains(&s.name) {
+                self.names.push(s.name.clone());
             }
         }
-        self.max_objects = self.max_objects.max(objects.len());
-        let order: Vec<usize> = (0..objects.len()).collect();
+        self.max_objects = self.max_objects.max(sources.len());
+        let order: Vec<usize> = (0..sources.len()).collect();
         let spec = StateSpec {
             relative_cm: self.relative_cm.clone(),
             fingers: self.fingers,
-            ..StateSpec::from_names(objects.iter().map(|o| o.name.as_str()), objects.len())
+            parts: self.parts,
+            ..StateSpec::from_names(sources.iter().map(|s| s.name.as_str()), sources.len())
         };
         let t = raw_tokens(&spec, objects, state, "0", &order)?;
-        let n = objects.len() + 1;
+        let n = sources.len() + 1;
         let nf = spec.features();
         for k in 0..n {
             let acc = if k + 1 == n {
@@ -181,6 +201,10 @@ impl StateStats {
         assert_eq!(
             self.fingers, other.fingers,
             "statistics of tokens with and without fingers"
+        );
+        assert_eq!(
+            self.parts, other.parts,
+            "statistics of tokens with and without parts"
         );
         for n in &other.names {
             if !self.names.contains(n) {
@@ -216,6 +240,7 @@ impl StateStats {
         StateSpec {
             relative_cm: self.relative_cm.clone(),
             fingers: self.fingers,
+            parts: self.parts,
             object_norm: norm(&self.objects),
             robot_norm: norm(&self.robot),
             ..StateSpec::from_names(self.names.iter().map(String::as_str), self.max_objects)
@@ -235,6 +260,7 @@ impl StateSpec {
             max_objects,
             relative_cm: Vec::new(),
             fingers: true,
+            parts: false,
             object_norm: [vec![0.0; FEATURES], vec![1.0; FEATURES]],
             robot_norm: [vec![0.0; FEATURES], vec![1.0; FEATURES]],
         }
@@ -269,6 +295,17 @@ impl StateSpec {
             }
         }
         Ok(())
+    }
+
+    /// Object tokens of a frame with `objects` (each object, and each of its parts with
+    /// [`StateSpec::parts`]): the length of the episode's [`order`].
+    pub fn object_tokens(&self, objects: &[ObjectAnnotation]) -> usize {
+        objects.len()
+            + if self.parts {
+                objects.iter().map(|o| o.parts.len()).sum()
+            } else {
+                0
+            }
     }
 
     /// Tokens per frame N (objects and the robot).
@@ -388,6 +425,43 @@ pub fn tokens(
     Ok(t)
 }
 
+/// What one object token is made of: an object, or one of its articulated parts.
+struct Source<'a> {
+    /// The name whose [`category`] is the token's: the object's, or `<object category>/<part>`.
+    name: String,
+    /// The object the token is or belongs to.
+    object: &'a ObjectAnnotation,
+    /// The pose fed (a part's grasp point and orientation), None when the object has none.
+    pose: Option<[f32; 7]>,
+    /// A part's joint position (0 for an object).
+    joint: f32,
+}
+
+/// The object tokens of a frame in scene order: every object, each followed by its parts when
+/// `parts`.
+fn sources(parts: bool, objects: &[ObjectAnnotation]) -> Vec<Source<'_>> {
+    let mut out = Vec::with_capacity(objects.len());
+    for o in objects {
+        out.push(Source {
+            name: o.name.clone(),
+            object: o,
+            pose: o.pose,
+            joint: 0.0,
+        });
+        if parts {
+            for p in &o.parts {
+                out.push(Source {
+                    name: format!("{}/{}", category(&o.name), p.name),
+                    object: o,
+                    pose: Some(p.pose),
+                    joint: p.joint,
+                });
+            }
+        }
+    }
+    out
+}
+
 /// [`tokens`] before standardisation.
 fn raw_tokens(
     spec: &StateSpec,
@@ -396,18 +470,20 @@ fn raw_tokens(
     robot_label: &str,
     order: &[usize],
 ) -> Result<StateTokens> {
-    if objects.len() > spec.max_objects {
+    let sources = sources(spec.parts, objects);
+    if sources.len() > spec.max_objects {
         return Err(ModelError::Input(format!(
-            "{} objects in the scene, the model reads at most {}",
-            objects.len(),
+            "{} objects{} in the scene, the model reads at most {}",
+            sources.len(),
+            if spec.parts { " and parts" } else { "" },
             spec.max_objects
         )));
     }
-    if order.len() != objects.len() {
+    if order.len() != sources.len() {
         return Err(ModelError::Input(format!(
             "an order of {} objects for {} objects",
             order.len(),
-            objects.len()
+            sources.len()
         )));
     }
     let n = spec.tokens();
@@ -417,8 +493,9 @@ fn raw_tokens(
     let mut labels = vec!["0".to_string(); n];
     let eef = [state[0], state[1], state[2]];
     for (k, &i) in order.iter().enumerate() {
-        let o = &objects[i];
-        let pose = o.pose.ok_or_else(|| {
+        let s = &sources[i];
+        let o = s.object;
+        let pose = s.pose.ok_or_else(|| {
             ModelError::Input(format!(
                 "object `{}` has no pose (the data was recorded without object poses)",
                 o.name
@@ -436,7 +513,8 @@ fn raw_tokens(
             pose[3], pose[4], pose[5], pose[6],
         ])));
         f[12] = f32::from(u8::from(o.grasped.unwrap_or(false)));
-        categories[k] = spec.category_id(&o.name);
+        f[13] = s.joint;
+        categories[k] = spec.category_id(&s.name);
         labels[k] = o.subgoal_label.clone();
     }
     let r = &mut features[(n - 1) * nf..];
@@ -472,6 +550,7 @@ mod tests {
             subgoal_label: label.into(),
             pose: Some([x, 0.1, 0.9, 1.0, 0.0, 0.0, 0.0]),
             grasped: Some(x > 0.0),
+            parts: Vec::new(),
         }
     }
 
@@ -665,6 +744,65 @@ mod tests {
         assert!(json.get("fingers").is_none(), "not written when true");
         assert_eq!(serde_json::to_value(&b).unwrap()["fingers"], false);
         assert_eq!(serde_json::from_value::<StateSpec>(json).unwrap(), a);
+    }
+
+    #[test]
+    fn articulated_parts_are_tokens_of_their_own_with_the_joint_position() {
+        let mut cabinet = obj("wooden_cabinet_1", 0.3, "one: open drawer");
+        cabinet.parts = ["top_handle", "middle_handle"]
+            .iter()
+            .enumerate()
+            .map(|(i, name)| data::PartState {
+                name: (*name).into(),
+                pose: [0.3, -0.1, 1.0 - 0.07 * i as f32, 1.0, 0.0, 0.0, 0.0],
+                joint: -0.05 * i as f32,
+            })
+            .collect();
+        let objects = [obj("bowl_1", 0.2, "0"), cabinet];
+        let state = [0.1, 0.1, 1.0, 0.0, 0.0, 0.0, 0.02, -0.02];
+        let mut stats = StateStats::default().with_parts();
+        stats.add(&objects, &state).unwrap();
+        let spec = stats.finish();
+        assert!(spec.parts);
+        assert_eq!(
+            spec.categories,
+            [
+                "bowl",
+                "wooden_cabinet",
+                "wooden_cabinet/middle_handle",
+                "wooden_cabinet/top_handle"
+            ]
+        );
+        assert_eq!((spec.max_objects, spec.object_tokens(&objects)), (4, 4));
+        let raw = StateSpec {
+            object_norm: [vec![0.0; FEATURES], vec![1.0; FEATURES]],
+            robot_norm: [vec![0.0; FEATURES], vec![1.0; FEATURES]],
+            ..spec.clone()
+        };
+        // Scene order: bowl, cabinet, its top handle, its middle handle; fed reversed.
+        let t = tokens(&raw, &objects, &state, "0", &[3, 2, 1, 0]).unwrap();
+        assert_eq!(t.categories, vec![5, 6, 4, 3, ROBOT]);
+        assert_eq!(
+            t.labels[..3],
+            ["one: open drawer"; 3],
+            "a part has its object's label"
+        );
+        let f = |k: usize| &t.features[k * FEATURES..(k + 1) * FEATURES];
+        // The middle handle: z 0.93 m → 9.3 dm, joint −0.05 in feature 13, the cabinet's grasp.
+        assert!((f(0)[2] - 9.3).abs() < 1e-5 && (f(0)[13] + 0.05).abs() < 1e-7);
+        assert_eq!((f(0)[12], f(2)[13], f(3)[13]), (1.0, 0.0, 0.0));
+        // Without parts the same scene is two object tokens, and the spec does not say parts.
+        let plain = StateSpec {
+            parts: false,
+            ..raw.clone()
+        };
+        assert_eq!(plain.object_tokens(&objects), 2);
+        let u = tokens(&plain, &objects, &state, "0", &[1, 0]).unwrap();
+        assert_eq!(u.categories, vec![4, 3, PAD, PAD, ROBOT]);
+        assert!(serde_json::to_value(&plain).unwrap().get("parts").is_none());
+        assert_eq!(serde_json::to_value(&raw).unwrap()["parts"], true);
+        let e = tokens(&raw, &objects, &state, "0", &[1, 0]).unwrap_err();
+        assert!(e.to_string().contains("an order of 2 objects for 4"), "{e}");
     }
 
     #[test]

@@ -217,6 +217,15 @@ fn add_poses(objects: &mut [ObjectAnnotation], obs: &Observation) {
     for (o, st) in objects.iter_mut().zip(&obs.objects) {
         o.pose = Some(st.pose());
         o.grasped = Some(st.grasped);
+        o.parts = st
+            .parts
+            .iter()
+            .map(|p| data::PartState {
+                name: p.name.clone(),
+                pose: p.pose(),
+                joint: p.joint as f32,
+            })
+            .collect();
     }
 }
 
@@ -264,6 +273,7 @@ fn annotations(
             subgoal_label: labels[k].clone(),
             pose: None,
             grasped: None,
+            parts: Vec::new(),
         })
         .collect()
 }

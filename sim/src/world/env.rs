@@ -157,7 +157,7 @@ pub struct Observation {
 }
 
 /// The simulator's privileged state of one scene instance (object or fixture) at an observation.
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, PartialEq)]
 pub struct ObjectState {
     /// Position of the instance's root body, world frame (m).
     pub pos: [f64; 3],
@@ -165,6 +165,33 @@ pub struct ObjectState {
     pub quat: [f64; 4],
     /// Both gripper fingers touch one of the instance's geoms.
     pub grasped: bool,
+    /// The instance's articulated parts, one per internal joint, in joint order.
+    pub parts: Vec<PartPose>,
+}
+
+/// The privileged state of one articulated part of an instance (a drawer, a knob, a door).
+#[derive(Debug, Clone, PartialEq)]
+pub struct PartPose {
+    /// Part name within the instance's category: `top_handle`, `middle_handle` and
+    /// `bottom_handle` for a wooden cabinet's drawers, `knob` for a stove, else the joint's name
+    /// without the instance prefix.
+    pub name: String,
+    /// Where the part is taken: the handle bar's centre for a wooden cabinet's drawer, the
+    /// knob's centre for a stove, else the origin of the joint's body (world frame, m).
+    pub pos: [f64; 3],
+    /// Orientation of the joint's body, quaternion (w, x, y, z).
+    pub quat: [f64; 4],
+    /// The joint's position (m for a slide, rad for a hinge).
+    pub joint: f64,
+}
+
+impl PartPose {
+    /// Position and quaternion as 7 floats (the episode files' part `pose`).
+    pub fn pose(&self) -> [f32; 7] {
+        let [x, y, z] = self.pos;
+        let [w, a, b, c] = self.quat;
+        [x, y, z, w, a, b, c].map(|v| v as f32)
+    }
 }
 
 impl ObjectState {
@@ -696,6 +723,53 @@ impl Env {
                     pos: self.data.body_pos(inst.root_body),
                     quat: self.data.body_quat(inst.root_body),
                     grasped: touches(0) && touches(1),
+                    parts: self.part_poses(&inst.name, &inst.joints),
+                }
+            })
+            .collect()
+    }
+
+    /// The articulated parts of the instance `name` with internal `joints` (joint id, qpos
+    /// address, class), in joint order.
+    fn part_poses(
+        &self,
+        name: &str,
+        joints: &[(usize, usize, crate::world::assets::Articulation)],
+    ) -> Vec<PartPose> {
+        use crate::world::assets::Articulation;
+        let model = self.data.model();
+        let q = self.data.qpos();
+        joints
+            .iter()
+            .map(|&(j, adr, art)| {
+                let body = model.joint_body(j);
+                let joint = model.name(ObjType::Joint, j).unwrap_or_default();
+                let local = joint
+                    .strip_prefix(name)
+                    .map_or(joint, |s| s.trim_start_matches('_'));
+                // The builtin cabinet's handle bars are the first geom of each drawer's handle
+                // group (`<name>_g25`, `_g35`, `_g45`), the stove's knob its own body.
+                let handle = match (art, local) {
+                    (Articulation::CabinetDrawer, "top_level") => Some(("top_handle", 25)),
+                    (Articulation::CabinetDrawer, "middle_level") => Some(("middle_handle", 35)),
+                    (Articulation::CabinetDrawer, "bottom_level") => Some(("bottom_handle", 45)),
+                    _ => None,
+                }
+                .and_then(|(part, g)| {
+                    model
+                        .id(ObjType::Geom, &format!("{name}_g{g}"))
+                        .map(|g| (part.to_string(), self.data.geom_pos(g)))
+                });
+                let (part, pos) = match (art, handle) {
+                    (_, Some(h)) => h,
+                    (Articulation::StoveKnob, None) => ("knob".into(), self.data.body_pos(body)),
+                    _ => (local.to_string(), self.data.body_pos(body)),
+                };
+                PartPose {
+                    name: part,
+                    pos,
+                    quat: self.data.body_quat(body),
+                    joint: q[adr],
                 }
             })
             .collect()
