@@ -44,8 +44,10 @@ fn replay(obs: train::config::ObsMode) {
     cfg.model.variant = "e_slotssm_oracle".into();
     cfg.model.obs = obs;
     if obs == train::config::ObsMode::State {
-        // With the squashed relative features, so both sides compute those too.
+        // With the squashed relative features and the cabinet's drawer handles as tokens of
+        // their own, so both sides compute those too.
         cfg.model.state_relative_cm = vec![2.0, 8.0];
+        cfg.model.state_parts = true;
     }
     cfg.data.augment = false;
     let vocab = train::dataset::RunData::model_vocab(&index).unwrap();
@@ -56,10 +58,18 @@ fn replay(obs: train::config::ObsMode) {
             &opened,
             &cfg.model.state_relative_cm,
             cfg.model.state_fingers,
+            cfg.model.state_parts,
         )
         .unwrap()
     });
     if let Some(s) = &spec {
+        assert!(
+            s.categories
+                .iter()
+                .any(|c| c == "wooden_cabinet/top_handle"),
+            "{:?}",
+            s.categories
+        );
         mcfg = mcfg.with_state(s.tokens(), s.num_categories(), s.features());
     }
     let run_data = train::dataset::RunData::open(&cfg, &mcfg, spec, &opened).unwrap();
