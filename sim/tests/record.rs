@@ -4,9 +4,9 @@ use sim::record::Recorder;
 use sim::task::registry;
 use sim::{Env, EnvConfig};
 
-/// T1 with 32² cameras and segmentation, as `sim generate` records it.
-fn t1_env() -> (sim::task::TaskSpec, Env) {
-    let task = registry::resolve("t1").unwrap();
+/// Task `id` with 32² cameras and segmentation, as `sim generate` records it.
+fn task_env(id: &str) -> (sim::task::TaskSpec, Env) {
+    let task = registry::resolve(id).unwrap();
     let cfg = EnvConfig {
         image_size: 32,
         segmentation: true,
@@ -14,6 +14,36 @@ fn t1_env() -> (sim::task::TaskSpec, Env) {
     };
     let env = Env::from_task(&task, cfg).unwrap();
     (task, env)
+}
+
+/// T1, as [`task_env`].
+fn t1_env() -> (sim::task::TaskSpec, Env) {
+    task_env("t1")
+}
+
+/// The expert's demonstration of `task` at seed 0 recorded under `dir` (asserted to succeed:
+/// `what` says what it does) and opened.
+fn expert_episode(
+    task: &sim::task::TaskSpec,
+    env: &mut Env,
+    dir: &std::path::Path,
+    what: &str,
+) -> data::EpisodeReader {
+    let path = dir.join("ep.mcap");
+    assert!(
+        sim::generate::record_episode(
+            env,
+            task,
+            0,
+            &path,
+            Default::default(),
+            &Default::default(),
+            false,
+        )
+        .unwrap(),
+        "the expert {what} at seed 0"
+    );
+    data::EpisodeReader::open(&path).unwrap()
 }
 
 #[test]
@@ -95,21 +125,7 @@ fn a_rollout_round_trips_through_mcap() {
 fn recorded_poses_track_the_objects_and_the_grasp() {
     let (task, mut env) = t1_env();
     let dir = tempfile::tempdir().unwrap();
-    let path = dir.path().join("ep.mcap");
-    assert!(
-        sim::generate::record_episode(
-            &mut env,
-            &task,
-            0,
-            &path,
-            Default::default(),
-            &Default::default(),
-            false,
-        )
-        .unwrap(),
-        "the expert solves T1 seed 0"
-    );
-    let reader = data::EpisodeReader::open(&path).unwrap();
+    let reader = expert_episode(&task, &mut env, dir.path(), "solves T1");
     let steps: Vec<data::StepRecord> = (0..reader.len())
         .map(|k| reader.read_step(k).unwrap())
         .collect();
@@ -145,29 +161,9 @@ fn recorded_poses_track_the_objects_and_the_grasp() {
 /// pull shows in the middle handle's place and joint (and nowhere else).
 #[test]
 fn drawer_parts_follow_the_pull() {
-    let task = registry::resolve("libero_goal/open_the_middle_drawer_of_the_cabinet").unwrap();
-    let cfg = EnvConfig {
-        image_size: 32,
-        segmentation: true,
-        ..EnvConfig::default()
-    };
-    let mut env = Env::from_task(&task, cfg).unwrap();
+    let (task, mut env) = task_env("libero_goal/open_the_middle_drawer_of_the_cabinet");
     let dir = tempfile::tempdir().unwrap();
-    let path = dir.path().join("ep.mcap");
-    assert!(
-        sim::generate::record_episode(
-            &mut env,
-            &task,
-            0,
-            &path,
-            Default::default(),
-            &Default::default(),
-            false,
-        )
-        .unwrap(),
-        "the expert opens the drawer at seed 0"
-    );
-    let reader = data::EpisodeReader::open(&path).unwrap();
+    let reader = expert_episode(&task, &mut env, dir.path(), "opens the drawer");
     let (first, last) = (
         reader.read_step(0).unwrap(),
         reader.read_step(reader.len() - 1).unwrap(),

@@ -484,29 +484,9 @@ fn state_mode_on_data_without_poses_and_oracle_without_goal_exit_2() {
     );
     // An oracle variant on episodes whose /goal records nothing (as data imported from RLDS).
     let stripped = dir.path().join("nogoal");
-    std::fs::create_dir_all(&stripped).unwrap();
-    let index = data::DatasetIndex::load(dataset()).unwrap();
-    for e in &index.episodes {
-        let r = data::EpisodeReader::open(dataset().join(&e.file)).unwrap();
-        let mut w = data::EpisodeWriter::create(
-            stripped.join(&e.file),
-            r.meta().clone(),
-            data::WriterOptions::default(),
-        )
-        .unwrap();
-        for t in 0..r.len() {
-            let mut step = r.read_step(t).unwrap();
-            step.progress = data::GoalProgress::default();
-            w.write_step(&step).unwrap();
-        }
-        w.finish().unwrap();
-    }
-    // A fresh index: the files' sizes and CRCs changed.
-    let opts_idx = data::IndexOptions {
-        val_fraction: index.val_fraction,
-        seed: index.split_seed,
-    };
-    data::build_index(&stripped, &opts_idx).unwrap();
+    let index = rewritten(&stripped, |step| {
+        step.progress = data::GoalProgress::default()
+    });
     let back = data::EpisodeReader::open(stripped.join(&index.episodes[0].file)).unwrap();
     assert_eq!(back.read_step(0).unwrap().progress.total, 0);
     let mut cfg = short_config(2, 2);
@@ -521,25 +501,11 @@ fn state_mode_on_data_without_poses_and_oracle_without_goal_exit_2() {
     // Articulated parts asked of episodes that record poses but no parts (schema 2, or scenes
     // without drawers and knobs): one error naming the dataset and the key.
     let posed = dir.path().join("posed");
-    std::fs::create_dir_all(&posed).unwrap();
-    for e in &index.episodes {
-        let r = data::EpisodeReader::open(dataset().join(&e.file)).unwrap();
-        let mut w = data::EpisodeWriter::create(
-            posed.join(&e.file),
-            r.meta().clone(),
-            data::WriterOptions::default(),
-        )
-        .unwrap();
-        for t in 0..r.len() {
-            let mut step = r.read_step(t).unwrap();
-            for o in &mut step.objects {
-                o.pose.get_or_insert([0.1, 0.0, 0.9, 1.0, 0.0, 0.0, 0.0]);
-            }
-            w.write_step(&step).unwrap();
+    rewritten(&posed, |step| {
+        for o in &mut step.objects {
+            o.pose.get_or_insert([0.1, 0.0, 0.9, 1.0, 0.0, 0.0, 0.0]);
         }
-        w.finish().unwrap();
-    }
-    data::build_index(&posed, &opts_idx).unwrap();
+    });
     let mut cfg = short_config(2, 2);
     cfg.data.dir = posed.clone();
     cfg.model.obs = train::config::ObsMode::State;
@@ -554,6 +520,34 @@ fn state_mode_on_data_without_poses_and_oracle_without_goal_exit_2() {
     assert!(!dir.path().join("run3").join("model.json").exists());
     // The same episodes train in state mode without parts.
     train::train(&cfg, &opts(&dir.path().join("run4"))).unwrap();
+}
+
+/// The test dataset copied to `to` with every step passed through `edit`, under a fresh index
+/// (the files' sizes and CRCs change) with the same split; returns the original index.
+fn rewritten(to: &std::path::Path, edit: impl Fn(&mut data::StepRecord)) -> data::DatasetIndex {
+    std::fs::create_dir_all(to).unwrap();
+    let index = data::DatasetIndex::load(dataset()).unwrap();
+    for e in &index.episodes {
+        let r = data::EpisodeReader::open(dataset().join(&e.file)).unwrap();
+        let mut w = data::EpisodeWriter::create(
+            to.join(&e.file),
+            r.meta().clone(),
+            data::WriterOptions::default(),
+        )
+        .unwrap();
+        for t in 0..r.len() {
+            let mut step = r.read_step(t).unwrap();
+            edit(&mut step);
+            w.write_step(&step).unwrap();
+        }
+        w.finish().unwrap();
+    }
+    let opts = data::IndexOptions {
+        val_fraction: index.val_fraction,
+        seed: index.split_seed,
+    };
+    data::build_index(to, &opts).unwrap();
+    index
 }
 
 /// Bits of every float parameter inside the modules named `part` (anywhere in the model tree,

@@ -159,8 +159,8 @@ impl StateStats {
     pub fn add(&mut self, objects: &[ObjectAnnotation], state: &[f32; 8]) -> Result<()> {
         let sources = sources(self.parts, objects);
         for s in &sources {
-            if !self.names.contains(&s.name) {
-                self.names.push(s.name.clone());
+            if !self.names.iter().any(|n| *n == s.name) {
+                self.names.push(s.name.to_string());
             }
         }
         self.max_objects = self.max_objects.max(sources.len());
@@ -169,7 +169,7 @@ impl StateStats {
             relative_cm: self.relative_cm.clone(),
             fingers: self.fingers,
             parts: self.parts,
-            ..StateSpec::from_names(sources.iter().map(|s| s.name.as_str()), sources.len())
+            ..StateSpec::from_names(sources.iter().map(|s| s.name.as_ref()), sources.len())
         };
         let t = raw_tokens(&spec, objects, state, "0", &order)?;
         let n = sources.len() + 1;
@@ -428,7 +428,7 @@ pub fn tokens(
 /// What one object token is made of: an object, or one of its articulated parts.
 struct Source<'a> {
     /// The name whose [`category`] is the token's: the object's, or `<object category>/<part>`.
-    name: String,
+    name: std::borrow::Cow<'a, str>,
     /// The object the token is or belongs to.
     object: &'a ObjectAnnotation,
     /// The pose fed (a part's grasp point and orientation), None when the object has none.
@@ -443,7 +443,7 @@ fn sources(parts: bool, objects: &[ObjectAnnotation]) -> Vec<Source<'_>> {
     let mut out = Vec::with_capacity(objects.len());
     for o in objects {
         out.push(Source {
-            name: o.name.clone(),
+            name: o.name.as_str().into(),
             object: o,
             pose: o.pose,
             joint: 0.0,
@@ -451,7 +451,7 @@ fn sources(parts: bool, objects: &[ObjectAnnotation]) -> Vec<Source<'_>> {
         if parts {
             for p in &o.parts {
                 out.push(Source {
-                    name: format!("{}/{}", category(&o.name), p.name),
+                    name: format!("{}/{}", category(&o.name), p.name).into(),
                     object: o,
                     pose: Some(p.pose),
                     joint: p.joint,
