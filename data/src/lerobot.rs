@@ -16,7 +16,11 @@
 //! `observation.objects.instance_id` `[N]` (−1: no object in that row), `subgoal.satisfied`,
 //! `subgoal.total`, `subgoal.current` (text) and `subgoal.labels` (the objects' labels as a
 //! JSON array). N is the most objects of any episode; the episodes table names each episode's
-//! objects (`libero_mem/objects`).
+//! objects (`libero_mem/objects`). Where episodes record articulated parts (episode schema 3:
+//! drawer handles, the stove's knob), `observation.parts.pose` `[P, 7]`, `observation.parts.joint`
+//! `[P]` and `observation.parts.object` `[P]` (the row of the part's object, −1: no part in that
+//! row) follow, P the most parts of any episode, and the episodes table names them
+//! (`libero_mem/parts`).
 
 use std::collections::BTreeMap;
 use std::fs::File;
@@ -40,7 +44,7 @@ use crate::episode::{EpisodeWriter, WriterOptions};
 use crate::error::{DataError, Result};
 use crate::imageio::{Flip, apply_flip};
 use crate::index::{DatasetIndex, IndexOptions, Split, build_index, quantile_sorted};
-use crate::schema::{EpisodeMeta, GoalProgress, ObjectAnnotation, RgbImage, StepRecord};
+use crate::schema::{EpisodeMeta, GoalProgress, ObjectAnnotation, PartState, RgbImage, StepRecord};
 use crate::video::{VideoOptions, VideoWriter};
 
 /// LeRobot's dataset format version written and read.
@@ -260,9 +264,22 @@ impl ImageStats {
     }
 }
 
-/// The numeric per-frame features we write besides the videos: name, dtype, shape.
-fn numeric_features(n_obj: usize) -> Vec<(&'static str, &'static str, Vec<usize>)> {
-    vec![
+/// Rows of the per-object and per-part features: the most objects, and the most articulated
+/// parts (drawer handles, knobs: episode schema 3), of any episode's frame.
+#[derive(Clone, Copy, Debug, Default)]
+struct Rows {
+    obj: usize,
+    part: usize,
+}
+
+/// The numeric per-frame features we write besides the videos: name, dtype, shape. The parts'
+/// features are written only when some episode has parts.
+fn numeric_features(rows: Rows) -> Vec<(&'static str, &'static str, Vec<usize>)> {
+    let Rows {
+        obj: n_obj,
+        part: n_part,
+    } = rows;
+    let mut features = vec![
         ("observation.state", "float32", vec![8]),
         ("observation.joint_state", "float32", vec![7]),
         ("action", "float32", vec![7]),
@@ -271,6 +288,15 @@ fn numeric_features(n_obj: usize) -> Vec<(&'static str, &'static str, Vec<usize>
         ("observation.objects.visible", "float32", vec![n_obj]),
         ("observation.objects.grasped", "float32", vec![n_obj]),
         ("observation.objects.instance_id", "int64", vec![n_obj]),
+    ];
+    if n_part > 0 {
+        features.extend([
+            ("observation.parts.pose", "float32", vec![n_part, 7]),
+            ("observation.parts.joint", "float32", vec![n_part]),
+            ("observation.parts.object", "int64", vec![n_part]),
+        ]);
+    }
+    features.extend([
         ("subgoal.satisfied", "int64", vec![1]),
         ("subgoal.total", "int64", vec![1]),
         ("timestamp", "float32", vec![1]),
@@ -278,18 +304,28 @@ fn numeric_features(n_obj: usize) -> Vec<(&'static str, &'static str, Vec<usize>
         ("episode_index", "int64", vec![1]),
         ("index", "int64", vec![1]),
         ("task_index", "int64", vec![1]),
-    ]
+    ]);
+    features
+}
+
+/// A frame's parts, objects in order and each object's parts in order: (object row, part).
+fn frame_parts(s: &StepRecord) -> impl Iterator<Item = (usize, &PartState)> {
+    s.objects
+        .iter()
+        .enumerate()
+        .flat_map(|(i, o)| o.parts.iter().map(move |p| (i, p)))
 }
 
 /// One frame's numbers, in the order of [`numeric_features`].
 fn frame_values(
     s: &StepRecord,
-    n_obj: usize,
+    rows: Rows,
     fps: f64,
     episode: usize,
     index: u64,
     task: usize,
 ) -> Vec<Vec<f64>> {
+    let n_obj = rows.obj;
     let mut pose = vec![0.0; n_obj * 7];
     let mut bbox = vec![0.0; n_obj * 4];
     let mut visible = vec![0.0; n_obj];
@@ -308,7 +344,7 @@ fn frame_values(
         grasped[i] = o.grasped.unwrap_or(false) as u8 as f64;
         ids[i] = o.instance_id as f64;
     }
-    vec![
+    let mut values = vec![
         s.state.iter().map(|v| *v as f64).collect(),
         s.joint_state.iter().map(|v| *v as f64).collect(),
         s.action.iter().map(|v| *v as f64).collect(),
@@ -317,6 +353,21 @@ fn frame_values(
         visible,
         grasped,
         ids,
+    ];
+    if rows.part > 0 {
+        let mut part_pose = vec![0.0; rows.part * 7];
+        let mut joint = vec![0.0; rows.part];
+        let mut owner = vec![-1.0; rows.part];
+        for (j, (i, p)) in frame_parts(s).enumerate().take(rows.part) {
+            for (d, v) in p.pose.iter().enumerate() {
+                part_pose[j * 7 + d] = *v as f64;
+            }
+            joint[j] = p.joint as f64;
+            owner[j] = i as f64;
+        }
+        values.extend([part_pose, joint, owner]);
+    }
+    values.extend([
         vec![s.progress.satisfied as f64],
         vec![s.progress.total as f64],
         vec![(s.step as f64 / fps) as f32 as f64],
@@ -324,7 +375,8 @@ fn frame_values(
         vec![episode as f64],
         vec![index as f64],
         vec![task as f64],
-    ]
+    ]);
+    values
 }
 
 /// Arrow type of a feature as LeRobot's `datasets` features store it: a scalar for `[1]`, a
@@ -359,7 +411,7 @@ fn hf_feature(dtype: &str, shape: &[usize]) -> Value {
 
 /// Column builders of one data file.
 struct DataColumns {
-    n_obj: usize,
+    dims: Rows,
     numeric: Vec<Vec<f64>>,
     rows: usize,
     current: Vec<String>,
@@ -369,10 +421,10 @@ struct DataColumns {
 }
 
 impl DataColumns {
-    fn new(n_obj: usize) -> Self {
+    fn new(dims: Rows) -> Self {
         DataColumns {
-            n_obj,
-            numeric: vec![Vec::new(); numeric_features(n_obj).len()],
+            dims,
+            numeric: vec![Vec::new(); numeric_features(dims).len()],
             rows: 0,
             current: Vec::new(),
             labels: Vec::new(),
@@ -403,10 +455,10 @@ impl DataColumns {
     }
 
     /// The schema of the data files.
-    fn schema(n_obj: usize) -> Schema {
+    fn schema(dims: Rows) -> Schema {
         let mut fields = Vec::new();
         let mut hf = serde_json::Map::new();
-        for (name, dtype, shape) in numeric_features(n_obj) {
+        for (name, dtype, shape) in numeric_features(dims) {
             let mut f = Field::new(name, arrow_type(dtype, &shape), false);
             if shape.len() == 2 {
                 let meta: std::collections::HashMap<String, String> = [
@@ -438,10 +490,9 @@ impl DataColumns {
     }
 
     fn batch(self) -> std::result::Result<RecordBatch, arrow_schema::ArrowError> {
-        let n_obj = self.n_obj;
-        let schema = Arc::new(Self::schema(n_obj));
+        let schema = Arc::new(Self::schema(self.dims));
         let mut cols: Vec<ArrayRef> = Vec::new();
-        for ((_, dtype, shape), flat) in numeric_features(n_obj).iter().zip(&self.numeric) {
+        for ((_, dtype, shape), flat) in numeric_features(self.dims).iter().zip(&self.numeric) {
             cols.push(column(dtype, shape, flat, self.rows));
         }
         let mut cur = StringBuilder::new();
@@ -568,13 +619,14 @@ pub fn export(dir: &Path, out: &Path, opts: &ExportOptions) -> Result<ExportRepo
     if order.is_empty() {
         return Err(invalid(&dir.join("index.json"), "no episodes"));
     }
-    // First pass: image size and the most objects of any episode.
-    let mut n_obj = 0;
+    // First pass: image size and the most objects and parts of any episode.
+    let mut dims = Rows::default();
     let mut size = None;
     for &i in &order {
         let r = index.episodes[i].open(dir)?;
         let s = r.read_step(0)?;
-        n_obj = n_obj.max(s.objects.len());
+        dims.obj = dims.obj.max(s.objects.len());
+        dims.part = dims.part.max(frame_parts(&s).count());
         let wh = (s.agentview.width, s.agentview.height);
         let path = r.path().to_path_buf();
         if (s.eye_in_hand.width, s.eye_in_hand.height) != wh {
@@ -614,12 +666,12 @@ pub fn export(dir: &Path, out: &Path, opts: &ExportOptions) -> Result<ExportRepo
     let root = tmp.path();
 
     let mut tasks: Vec<String> = Vec::new();
-    let mut stats: Vec<FeatureStats> = (0..numeric_features(n_obj).len())
+    let mut stats: Vec<FeatureStats> = (0..numeric_features(dims).len())
         .map(|_| FeatureStats::default())
         .collect();
     let mut img_stats = [ImageStats::default(), ImageStats::default()];
     let mut episodes_rows: Vec<BTreeMap<String, Value>> = Vec::new();
-    let mut data = DataColumns::new(n_obj);
+    let mut data = DataColumns::new(dims);
     let mut data_pos = (0usize, 0usize);
     let mut data_files = 0usize;
     let mut data_start_row = 0u64;
@@ -693,17 +745,21 @@ pub fn export(dir: &Path, out: &Path, opts: &ExportOptions) -> Result<ExportRepo
                 img_stats[c].push(&px);
                 videos.writers[c].as_mut().expect("open").push(&px)?;
             }
-            if s.objects.len() > n_obj {
+            let n_parts = frame_parts(s).count();
+            if s.objects.len() > dims.obj || n_parts > dims.part {
                 return Err(invalid(
                     reader.path(),
                     format!(
-                        "step {}: {} objects, step 0 of the dataset's episodes at most {n_obj}",
+                        "step {}: {} objects and {n_parts} parts, step 0 of the dataset's \
+                         episodes at most {} and {}",
                         s.step,
-                        s.objects.len()
+                        s.objects.len(),
+                        dims.obj,
+                        dims.part
                     ),
                 ));
             }
-            let values = frame_values(s, n_obj, fps, e, index_row, task);
+            let values = frame_values(s, dims, fps, e, index_row, task);
             for (st, v) in stats.iter_mut().zip(&values) {
                 st.push(v);
             }
@@ -738,11 +794,18 @@ pub fn export(dir: &Path, out: &Path, opts: &ExportOptions) -> Result<ExportRepo
         row.insert("libero_mem/seed".into(), json!(meta.seed as i64));
         row.insert("libero_mem/source_file".into(), json!(entry.file));
         row.insert("libero_mem/objects".into(), Value::Array(objects));
+        if dims.part > 0 {
+            let parts: Vec<Value> = steps
+                .first()
+                .map(|s| frame_parts(s).map(|(_, p)| json!(p.name)).collect())
+                .unwrap_or_default();
+            row.insert("libero_mem/parts".into(), Value::Array(parts));
+        }
         episodes_rows.push(row);
         // Data files: a new one once the current passed its limit.
         if data.bytes > opts.data_file_mb * 1024 * 1024 || e + 1 == order.len() {
             let p = root.join(chunk_path(DATA_PATH, "", data_pos.0, data_pos.1));
-            let batch = std::mem::replace(&mut data, DataColumns::new(n_obj))
+            let batch = std::mem::replace(&mut data, DataColumns::new(dims))
                 .batch()
                 .map_err(|err| pq_err(&p, err))?;
             debug_assert_eq!(batch.num_rows() as u64, index_row - data_start_row);
@@ -822,10 +885,14 @@ pub fn export(dir: &Path, out: &Path, opts: &ExportOptions) -> Result<ExportRepo
             json!(["object", "x_y_z_qw_qx_qy_qz"]),
         ),
         ("observation.objects.box", json!(["object", "x_y_w_h"])),
+        (
+            "observation.parts.pose",
+            json!(["part", "x_y_z_qw_qx_qy_qz"]),
+        ),
     ]
     .into();
     let mut stats_json = serde_json::Map::new();
-    for ((name, dtype, shape), st) in numeric_features(n_obj).iter().zip(&stats) {
+    for ((name, dtype, shape), st) in numeric_features(dims).iter().zip(&stats) {
         features.insert(
             (*name).into(),
             json!({"dtype": dtype, "shape": shape, "names": names.get(name).cloned().unwrap_or(Value::Null)}),
@@ -864,7 +931,8 @@ pub fn export(dir: &Path, out: &Path, opts: &ExportOptions) -> Result<ExportRepo
         "libero_mem": {
             "exported_from": "libero-mem-rs",
             "image_flip": opts.flip.name(),
-            "max_objects": n_obj,
+            "max_objects": dims.obj,
+            "max_parts": dims.part,
         },
     });
     let write_json = |p: &Path, v: &Value| -> Result<()> {
@@ -1046,6 +1114,7 @@ struct EpisodeRow {
     task_id: Option<String>,
     seed: Option<i64>,
     objects: Vec<String>,
+    parts: Vec<String>,
 }
 
 /// All record batches of a parquet file.
@@ -1332,14 +1401,17 @@ pub fn import(root: &Path, out: &Path, opts: &ImportOptions) -> Result<ImportRep
                         from_ts,
                     ));
                 }
-                let objects = b
-                    .column_by_name("libero_mem/objects")
-                    .filter(|a| matches!(a.data_type(), DataType::List(_)))
-                    .map(|a| {
-                        let l = a.as_list::<i32>().value(r);
-                        (0..l.len()).filter_map(|i| str_at(&l, i)).collect()
-                    })
-                    .unwrap_or_default();
+                let names = |key: &str| -> Vec<String> {
+                    b.column_by_name(key)
+                        .filter(|a| matches!(a.data_type(), DataType::List(_)))
+                        .map(|a| {
+                            let l = a.as_list::<i32>().value(r);
+                            (0..l.len()).filter_map(|i| str_at(&l, i)).collect()
+                        })
+                        .unwrap_or_default()
+                };
+                let objects = names("libero_mem/objects");
+                let parts = names("libero_mem/parts");
                 episodes.push(EpisodeRow {
                     index: int_at(&ei, r, "episode_index", p)?,
                     task,
@@ -1357,6 +1429,7 @@ pub fn import(root: &Path, out: &Path, opts: &ImportOptions) -> Result<ImportRep
                         .column_by_name("libero_mem/seed")
                         .and_then(|a| int_at(a, r, "seed", p).ok()),
                     objects,
+                    parts,
                 });
             }
         }
@@ -1492,11 +1565,26 @@ pub fn import(root: &Path, out: &Path, opts: &ImportOptions) -> Result<ImportRep
                 .and_then(|a| str_at(a, *r))
                 .and_then(|t| serde_json::from_str(&t).ok())
                 .unwrap_or_default();
+            let part_pose = get("observation.parts.pose").unwrap_or_default();
+            let part_joint = get("observation.parts.joint").unwrap_or_default();
+            let part_object = get("observation.parts.object").unwrap_or_default();
             let mut objects = Vec::new();
             for (i, id) in ids.iter().enumerate() {
                 if *id < 0.0 {
                     continue;
                 }
+                let parts = part_object
+                    .iter()
+                    .enumerate()
+                    .filter(|(_, o)| **o == i as f64)
+                    .map(|(j, _)| PartState {
+                        name: e.parts.get(j).cloned().unwrap_or_default(),
+                        pose: std::array::from_fn(|d| {
+                            part_pose.get(j * 7 + d).copied().unwrap_or(0.0) as f32
+                        }),
+                        joint: part_joint.get(j).copied().unwrap_or(0.0) as f32,
+                    })
+                    .collect();
                 let at =
                     |v: &[f64], d: usize, n: usize| v.get(i * n + d).copied().unwrap_or(0.0) as f32;
                 objects.push(ObjectAnnotation {
@@ -1513,7 +1601,7 @@ pub fn import(root: &Path, out: &Path, opts: &ImportOptions) -> Result<ImportRep
                     pose: (pose.len() >= (i + 1) * 7)
                         .then(|| std::array::from_fn(|d| at(&pose, d, 7))),
                     grasped: (grasped.len() > i).then(|| at(&grasped, 0, 1) > 0.5),
-                    parts: Vec::new(),
+                    parts,
                 });
             }
             let int = |name: &str| get(name).and_then(|v| v.first().copied()).unwrap_or(0.0) as u32;

@@ -107,6 +107,22 @@ fn export_opens_in_lerobot_and_imports_back() {
         serde_json::json!([8])
     );
     assert_eq!(info["features"]["action"]["shape"], serde_json::json!([7]));
+    // The scene's cabinet: its three drawer handles as part rows of their own.
+    let parts = eps[0].1[0]
+        .objects
+        .iter()
+        .map(|o| o.parts.len())
+        .sum::<usize>();
+    assert_eq!(parts, 3, "the scene's cabinet has three drawer handles");
+    assert_eq!(info["libero_mem"]["max_parts"], 3);
+    assert_eq!(
+        info["features"]["observation.parts.pose"]["shape"],
+        serde_json::json!([3, 7])
+    );
+    assert_eq!(
+        info["features"]["observation.parts.object"]["shape"],
+        serde_json::json!([3])
+    );
     assert_eq!(
         info["features"]["observation.images.wrist_image"]["shape"],
         serde_json::json!([64, 64, 3])
