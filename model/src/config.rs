@@ -295,6 +295,10 @@ pub struct TextConfig {
     pub max_len: usize,
 }
 
+fn unit() -> f64 {
+    1.0
+}
+
 /// Loss weights and the contrastive temperature (model.md §3, §8).
 #[derive(Serialize, Deserialize, Clone, Debug, PartialEq)]
 #[serde(deny_unknown_fields)]
@@ -307,6 +311,10 @@ pub struct LossConfig {
     pub window: f64,
     /// λ_sa (0 turns the slot decoder off: it is then not built).
     pub slot_recon: f64,
+    /// Weight of the gripper (the last action dimension) in the action loss, the arm's six being
+    /// 1: the loss is the weighted mean over the chunk's entries (1, the default: a plain mean).
+    #[serde(default = "unit")]
+    pub gripper: f64,
     /// Contrastive temperature τ.
     pub tau: f64,
     /// Hidden width of the spatial-broadcast slot decoder.
@@ -403,6 +411,7 @@ impl ModelConfig {
                 contrastive: 0.5,
                 window: 1.0,
                 slot_recon: 1.0,
+                gripper: 1.0,
                 tau: 1.0,
                 sa_hidden: 64,
             },
@@ -468,6 +477,7 @@ impl ModelConfig {
                 contrastive: 0.5,
                 window: 1.0,
                 slot_recon: 1.0,
+                gripper: 1.0,
                 tau: 1.0,
                 sa_hidden: 1024,
             },
@@ -484,13 +494,14 @@ impl ModelConfig {
     }
 
     /// The loss weights by name, for checks and reports.
-    fn loss_weights(&self) -> [(&'static str, f64); 4] {
+    fn loss_weights(&self) -> [(&'static str, f64); 5] {
         let l = &self.loss;
         [
             ("action", l.action),
             ("contrastive", l.contrastive),
             ("window", l.window),
             ("slot_recon", l.slot_recon),
+            ("gripper", l.gripper),
         ]
     }
 

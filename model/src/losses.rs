@@ -22,6 +22,21 @@ pub fn action_l1(pred: Tensor<4>, target: Tensor<4>, mask: Tensor<4>) -> Tensor<
     masked_mean((pred - target).abs(), mask)
 }
 
+/// The action mask with the gripper column (the last of A) weighted by `gripper`, the others by 1.
+///
+/// # Shapes
+/// - mask: `[B, T, H_a, A]` → `[B, T, H_a, A]`
+pub fn weight_gripper(mask: Tensor<4>, gripper: f64) -> Tensor<4> {
+    if gripper == 1.0 {
+        return mask;
+    }
+    let a = mask.dims()[3];
+    let mut w = vec![1.0f32; a];
+    w[a - 1] = gripper as f32;
+    let w = Tensor::<4>::from_data(TensorData::new(w, [1, 1, 1, a]), &mask.device());
+    mask * w
+}
+
 /// Action loss of the discrete head: cross-entropy of the 256-bin logits against the targets'
 /// classes, averaged over the entries where `mask` = 1.
 ///
@@ -194,6 +209,28 @@ mod tests {
         assert!((scalar(action_l1(pred.clone(), target.clone(), all)) - 3.0).abs() < 1e-6);
         let some = Tensor::<4>::from_floats([[[[1.0, 0.0], [1.0, 0.0]]]], &device);
         assert!((scalar(action_l1(pred, target, some)) - 2.0).abs() < 1e-6);
+    }
+
+    #[test]
+    fn gripper_weight_scales_the_last_column_of_the_weighted_mean() {
+        let (_g, device) = test_device();
+        // |errors| 1 and 4 on the arm, 2 and 8 on the gripper (A = 2: arm, gripper).
+        let pred = Tensor::<4>::from_floats([[[[1.0, 2.0], [4.0, 8.0]]]], &device);
+        let target = Tensor::<4>::zeros([1, 1, 2, 2], &device);
+        let all = Tensor::<4>::ones([1, 1, 2, 2], &device);
+        let plain = weight_gripper(all.clone(), 1.0);
+        assert!((scalar(action_l1(pred.clone(), target.clone(), plain)) - 3.75).abs() < 1e-6);
+        // Weight 3: (1 + 4 + 3·(2 + 8)) / (2 + 3·2) = 35 / 8.
+        let w = weight_gripper(all.clone(), 3.0);
+        assert_eq!(
+            w.clone().into_data().try_to_vec::<f32>().unwrap(),
+            vec![1.0, 3.0, 1.0, 3.0]
+        );
+        assert!((scalar(action_l1(pred.clone(), target.clone(), w)) - 35.0 / 8.0).abs() < 1e-6);
+        // Masked entries stay out whatever the weight.
+        let some = Tensor::<4>::from_floats([[[[1.0, 1.0], [0.0, 0.0]]]], &device);
+        let w = weight_gripper(some, 3.0);
+        assert!((scalar(action_l1(pred, target, w)) - 7.0 / 4.0).abs() < 1e-6);
     }
 
     #[test]

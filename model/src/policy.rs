@@ -243,6 +243,7 @@ impl PolicyModel {
                 .repeat_dim(2, ha)
                 .repeat_dim(3, a)
         });
+        let action_mask = losses::weight_gripper(action_mask, cfg.loss.gripper);
         let action = match (cfg.decoder.head, &out.logits) {
             (ActionHead::Bins, Some(logits)) => {
                 losses::action_ce(logits.clone(), batch.actions.clone(), action_mask)

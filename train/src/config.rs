@@ -229,6 +229,9 @@ pub struct LossWeights {
     /// λ_sa (0 also removes the slot decoder from the model).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub slot_recon: Option<f64>,
+    /// Weight of the gripper dimension within the action loss (the arm's dimensions 1; default 1).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub gripper: Option<f64>,
 }
 
 /// `[train]`: optimisation, schedule, checkpoints, validation.
@@ -434,6 +437,7 @@ impl Config {
             ("contrastive", w.contrastive),
             ("window", w.window),
             ("slot_recon", w.slot_recon),
+            ("gripper", w.gripper),
         ] {
             if let Some(v) = v
                 && !finite_nonneg(v)
@@ -518,6 +522,9 @@ impl Config {
         }
         if let Some(v) = w.slot_recon {
             cfg.loss.slot_recon = v;
+        }
+        if let Some(v) = w.gripper {
+            cfg.loss.gripper = v;
         }
         cfg.text.vocab = vocab;
         cfg.validate().map_err(|e| format!("[model]: {e}"))?;
@@ -661,7 +668,7 @@ variant = "e_slotssm"
     #[test]
     fn overrides_and_loss_weights_apply() {
         let c = Config::parse(&format!(
-            "{MIN}[model.overrides]\nimage_size = [32, 32]\ndecoder = {{ layers = 1 }}\n[train.loss_weights]\nslot_recon = 0.0\n"
+            "{MIN}[model.overrides]\nimage_size = [32, 32]\ndecoder = {{ layers = 1 }}\n[train.loss_weights]\nslot_recon = 0.0\ngripper = 4.0\n"
         ))
         .unwrap();
         let m = c.model_config(vec![]).unwrap();
@@ -669,6 +676,14 @@ variant = "e_slotssm"
         assert_eq!(m.decoder.layers, 1);
         assert_eq!(m.decoder.width, 128);
         assert_eq!(m.loss.slot_recon, 0.0);
+        assert_eq!(m.loss.gripper, 4.0);
+        let plain = Config::parse(MIN).unwrap().model_config(vec![]).unwrap();
+        assert_eq!(plain.loss.gripper, 1.0);
+        let e = Config::parse(&format!("{MIN}[train.loss_weights]\ngripper = -1.0\n")).unwrap_err();
+        assert_eq!(
+            e,
+            "train.loss_weights.gripper: must be a finite number ≥ 0 (got -1)"
+        );
         let e =
             Config::parse(&format!("{MIN}[model.overrides]\nimage_size = \"big\"\n")).unwrap_err();
         assert!(e.contains("model.overrides"), "{e}");
