@@ -96,6 +96,7 @@ pub fn bench_windows(
             augment: Some(Augment::default()),
             seed: 0,
             mask_idle_tail: false,
+            state_noise: 0.0,
         };
         let ds = WindowDataset::open(dir, Split::Train, cfg)?;
         let mut rng = ChaCha8Rng::seed_from_u64(1);

@@ -11,6 +11,7 @@ use std::sync::atomic::{AtomicU64, Ordering};
 
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
+use rand_distr::{Distribution, Normal};
 use rayon::prelude::*;
 
 use crate::episode::EpisodeReader;
@@ -71,6 +72,11 @@ pub struct WindowConfig {
     /// policy to freeze (OpenVLA drops LIBERO's no-op steps for the same reason). The frames stay
     /// in the windows, so carried memory still sees them.
     pub mask_idle_tail: bool,
+    /// σ in metres of Gaussian noise on every position a state-mode model reads: the robot's
+    /// eef position and each object's and articulated part's position, drawn per frame (0 = off;
+    /// see [`perturb_positions`]). A regulariser for state-mode training: the action targets stay
+    /// the demonstration's.
+    pub state_noise: f32,
 }
 
 /// Largest norm of the six arm dims of an action that counts as standing still (OpenVLA's no-op
@@ -106,6 +112,7 @@ impl Default for WindowConfig {
             augment: None,
             seed: 0,
             mask_idle_tail: false,
+            state_noise: 0.0,
         }
     }
 }
@@ -498,13 +505,18 @@ impl WindowDataset {
         let mut actions = Vec::with_capacity(tl * c.chunk * 7);
         let mut action_mask = Vec::with_capacity(tl * c.chunk);
         let mut states = Vec::with_capacity(tl * 8);
+        let noise_seed = |f: usize| mix(aug_seed ^ mix(f as u64 ^ NOISE_SALT));
         for &f in &frame_steps {
             for h in 0..c.chunk {
                 let a = (f + h).min(n - 1);
                 actions.extend(self.norm.normalize(&raw[a - lo].action));
                 action_mask.push(f + h < end);
             }
-            states.extend(raw[f - lo].state);
+            let mut state = raw[f - lo].state;
+            if c.state_noise > 0.0 {
+                perturb_positions(c.state_noise, noise_seed(f), &mut state, &mut []);
+            }
+            states.extend(state);
         }
         Ok(WindowSample {
             episode: *episode,
@@ -540,11 +552,46 @@ impl WindowDataset {
                     if let Some(a) = aug.as_ref().filter(|_| c.images) {
                         shift_boxes(&mut objects, a.dx, a.dy, c.image_size);
                     }
+                    if c.state_noise > 0.0 {
+                        let mut state = raw[f - lo].state;
+                        perturb_positions(c.state_noise, noise_seed(f), &mut state, &mut objects);
+                    }
                     objects
                 })
                 .collect(),
             frame_steps,
         })
+    }
+}
+
+/// Salt of the per-frame state-noise seeds (apart from the augmentation's draws).
+const NOISE_SALT: u64 = 0x7374_6174_655f_6e6f;
+
+/// Adds σ-Gaussian noise (metres) to the eef position `state[0..3]`, then to the position of
+/// every object with a pose and of each of its parts, in scene order, all drawn from `seed`:
+/// the same seed perturbs the same frame identically, so the robot and the objects of one frame
+/// move by the same draws whether or not the objects are perturbed in the same call.
+pub fn perturb_positions(
+    sigma: f32,
+    seed: u64,
+    state: &mut [f32; 8],
+    objects: &mut [ObjectAnnotation],
+) {
+    let normal = Normal::new(0.0f32, sigma).expect("σ ≥ 0 is checked by the config");
+    let mut rng = ChaCha8Rng::seed_from_u64(seed);
+    let mut shift = |p: &mut [f32]| {
+        for x in &mut p[..3] {
+            *x += normal.sample(&mut rng);
+        }
+    };
+    shift(&mut state[..]);
+    for o in objects {
+        if let Some(p) = o.pose.as_mut() {
+            shift(&mut p[..]);
+        }
+        for part in &mut o.parts {
+            shift(&mut part.pose[..]);
+        }
     }
 }
 

@@ -416,3 +416,106 @@ fn masked_idle_tail_leaves_the_frames_but_drops_their_actions() {
         plain.chunk(1 - ep0, 6, 0).unwrap()
     );
 }
+
+#[test]
+fn state_noise_moves_positions_only_and_is_the_same_for_a_frame_in_every_chunk() {
+    // Give one object an articulated part, so parts are perturbed too.
+    let (dir, _) = dataset_with(&[12], |_, steps| {
+        for s in steps.iter_mut() {
+            let o = s
+                .objects
+                .iter_mut()
+                .find(|o| o.pose.is_some())
+                .expect("synthetic steps have a posed object");
+            o.parts = vec![PartState {
+                name: "handle".into(),
+                pose: [0.3, 0.2, 1.0, 1.0, 0.0, 0.0, 0.0],
+                joint: 0.05,
+            }];
+        }
+    });
+    let cfg = WindowConfig {
+        past: 3,
+        future: 0,
+        chunk: 2,
+        image_size: 16,
+        images: false,
+        ..Default::default()
+    };
+    let sigma = 0.01;
+    let plain = WindowDataset::open(dir.path(), Split::Train, cfg.clone()).unwrap();
+    let noisy = WindowDataset::open(
+        dir.path(),
+        Split::Train,
+        WindowConfig {
+            state_noise: sigma,
+            ..cfg
+        },
+    )
+    .unwrap();
+    let (p, m) = (plain.chunk(0, 4, 0).unwrap(), noisy.chunk(0, 4, 0).unwrap());
+    // Same seed, same noise; actions, masks and labels untouched.
+    assert_eq!(m, noisy.chunk(0, 4, 0).unwrap());
+    assert_eq!(
+        (&m.actions, &m.action_mask, &m.frame_mask),
+        (&p.actions, &p.action_mask, &p.frame_mask)
+    );
+    let mut deltas = vec![];
+    for (f, (ps, ms)) in p.states.chunks(8).zip(m.states.chunks(8)).enumerate() {
+        // The eef moves, the rest of the proprio state does not.
+        assert_eq!(&ps[3..], &ms[3..], "frame {f}");
+        deltas.extend((0..3).map(|d| ms[d] - ps[d]));
+        for (po, mo) in p.objects[f].iter().zip(&m.objects[f]) {
+            assert_eq!(
+                (&po.name, po.bbox, &po.subgoal_label),
+                (&mo.name, mo.bbox, &mo.subgoal_label)
+            );
+            match (po.pose, mo.pose) {
+                (Some(a), Some(b)) => {
+                    assert_eq!(a[3..], b[3..], "orientation kept");
+                    deltas.extend((0..3).map(|d| b[d] - a[d]));
+                    let (pa, pb) = (&po.parts[0], &mo.parts[0]);
+                    assert_eq!(
+                        (pa.joint, pa.pose[3..].to_vec()),
+                        (pb.joint, pb.pose[3..].to_vec())
+                    );
+                    deltas.extend((0..3).map(|d| pb.pose[d] - pa.pose[d]));
+                }
+                (None, None) => {}
+                other => panic!("pose presence changed: {other:?}"),
+            }
+        }
+    }
+    assert!(
+        deltas.iter().all(|d| *d != 0.0 && d.abs() < 6.0 * sigma),
+        "{deltas:?}"
+    );
+    // Chunks starting at 4 and at 6 share frames 6 and 7 (the second's past): same noise there.
+    let later = noisy.chunk(0, 6, 0).unwrap();
+    let at = |s: &WindowSample, step: usize| s.frame_steps.iter().position(|&f| f == step).unwrap();
+    for step in [6, 7] {
+        let (i, j) = (at(&m, step), at(&later, step));
+        assert_eq!(m.states[i * 8..i * 8 + 8], later.states[j * 8..j * 8 + 8]);
+        assert_eq!(m.objects[i], later.objects[j]);
+    }
+    // Another epoch draws other noise.
+    assert_ne!(noisy.chunk(0, 4, 1).unwrap().states, m.states);
+}
+
+#[test]
+fn perturbed_positions_have_the_asked_spread() {
+    let mut d = vec![];
+    for seed in 0..2000u64 {
+        let mut s = [0.0f32; 8];
+        data::window::perturb_positions(0.02, seed, &mut s, &mut []);
+        d.extend_from_slice(&s[..3]);
+        assert_eq!(s[3..], [0.0; 5]);
+    }
+    let n = d.len() as f32;
+    let mean = d.iter().sum::<f32>() / n;
+    let sd = (d.iter().map(|x| (x - mean).powi(2)).sum::<f32>() / n).sqrt();
+    assert!(
+        mean.abs() < 0.001 && (sd - 0.02).abs() < 0.001,
+        "mean {mean}, sd {sd}"
+    );
+}

@@ -81,6 +81,10 @@ pub struct DataConfig {
     /// e.g. the hold of `generate.hold_steps`): frames that teach a policy to freeze.
     #[serde(default, skip_serializing_if = "std::ops::Not::not")]
     pub mask_idle_tail: bool,
+    /// σ in metres of Gaussian noise on the positions a state-mode model reads (eef, objects,
+    /// parts), drawn per training frame; validation windows stay clean (0 = off).
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub state_noise: f64,
 }
 
 fn yes() -> bool {
@@ -397,6 +401,15 @@ impl Config {
         }
         if !self.model.state_fingers && self.model.obs != ObsMode::State {
             return Err("model.state_fingers: only state mode (`obs = \"state\"`) reads it".into());
+        }
+        let sigma = self.data.state_noise;
+        if !(sigma.is_finite() && (0.0..=0.1).contains(&sigma)) {
+            return Err(format!(
+                "data.state_noise: must be a number of metres in [0, 0.1] (got {sigma})"
+            ));
+        }
+        if sigma > 0.0 && self.model.obs != ObsMode::State {
+            return Err("data.state_noise: only state mode (`obs = \"state\"`) reads it".into());
         }
         if self.model.state_parts && self.model.obs != ObsMode::State {
             return Err("model.state_parts: only state mode (`obs = \"state\"`) reads it".into());
@@ -782,6 +795,33 @@ variant = "e_slotssm"
             e.to_string().contains("model.state_parts: only state mode"),
             "{e}"
         );
+        let c =
+            Config::load_with(&p, &sets(&["model.obs=state", "data.state_noise=0.005"])).unwrap();
+        assert_eq!(c.data.state_noise, 0.005);
+        assert!(c.to_toml().contains("state_noise = 0.005"));
+        assert!(
+            !Config::load_with(&p, &sets(&["model.obs=state"]))
+                .unwrap()
+                .to_toml()
+                .contains("state_noise")
+        );
+        let e = Config::load_with(&p, &sets(&["data.state_noise=0.005"])).unwrap_err();
+        assert!(
+            e.to_string().contains("data.state_noise: only state mode"),
+            "{e}"
+        );
+        for bad in ["-0.01", "0.5", "nan"] {
+            let e = Config::load_with(
+                &p,
+                &sets(&["model.obs=state", &format!("data.state_noise={bad}")]),
+            )
+            .unwrap_err();
+            assert!(
+                e.to_string()
+                    .contains("data.state_noise: must be a number of metres in [0, 0.1]"),
+                "{bad}: {e}"
+            );
+        }
         let e = Config::load_with(&p, &sets(&["model.state_relative_cm=[2]"])).unwrap_err();
         assert!(e.to_string().contains("only state mode"), "{e}");
         let e = Config::load_with(

@@ -167,6 +167,7 @@ impl RunData {
             augment: cfg.data.augment.then(data::Augment::default),
             seed: cfg.train.seed,
             mask_idle_tail: cfg.data.mask_idle_tail,
+            state_noise: cfg.data.state_noise as f32,
         };
         let train = WindowDataset::from_opened(data, Split::Train, win.clone())?;
         if train.is_empty() {
@@ -177,6 +178,7 @@ impl RunData {
         }
         let val_win = WindowConfig {
             augment: None,
+            state_noise: 0.0,
             ..win
         };
         let val = if index.split(Split::Val).is_empty() {
