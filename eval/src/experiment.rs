@@ -173,6 +173,24 @@ impl Experiment {
                 return Err(bad(format!("runs[{i}].variants: unknown variant `{v}`")));
             }
         }
+        // Two plans of one run would train one directory twice and count it twice in the tables.
+        let mut first: std::collections::HashMap<String, usize> = std::collections::HashMap::new();
+        for p in x.plan() {
+            let i = x
+                .runs
+                .iter()
+                .position(|r| std::ptr::eq(r, p.spec))
+                .expect("planned from these runs");
+            if let Some(&j) = first.get(&p.name) {
+                return Err(bad(format!(
+                    "runs[{i}]: run `{}` is planned twice (also by runs[{j}]: the same obs, suite, \
+                     variant, tag and seed): give one another `tag`, or list further training \
+                     seeds in `seeds`",
+                    p.name
+                )));
+            }
+            first.insert(p.name, i);
+        }
         Ok(x)
     }
 
@@ -1249,6 +1267,36 @@ mod tests {
         .unwrap();
         let e = Experiment::load(&p).unwrap_err().to_string();
         assert!(e.contains("unknown variant `slotssm`"), "{e}");
+        // One run planned twice: by a second entry, or by a seed of one entry the other runs.
+        let entry = |tag: &str, seeds: &str| {
+            format!(
+                "[[runs]]\nobs = \"state\"\nsuite = \"t1\"\nconfig = \"c\"\nvariants = [\"e_slotssm\"]\ntag = \"{tag}\"\nseeds = {seeds}\n"
+            )
+        };
+        for (second, which) in [
+            (entry("a", "[]"), "`x_state_t1_e_slotssm_a`"),
+            (entry("a_seed1", "[]"), "`x_state_t1_e_slotssm_a_seed1`"),
+        ] {
+            let text = format!("name = \"x\"\nout = \"d\"\n{}{second}", entry("a", "[1]"));
+            std::fs::write(&p, text).unwrap();
+            let e = Experiment::load(&p).unwrap_err().to_string();
+            assert!(
+                e.contains(&format!(
+                    "runs[1]: run {which} is planned twice (also by runs[0]"
+                )) && e.contains("x.toml"),
+                "{e}"
+            );
+        }
+        std::fs::write(
+            &p,
+            format!(
+                "name = \"x\"\nout = \"d\"\n{}{}",
+                entry("a", "[1]"),
+                entry("b", "[1]")
+            ),
+        )
+        .unwrap();
+        assert_eq!(Experiment::load(&p).unwrap().plan().len(), 4);
     }
 
     /// With `--jobs`, the first run of a config whose dataset is missing trains alone, first.
