@@ -502,11 +502,25 @@ impl WindowDataset {
         let images = if c.images { frames(false)? } else { Vec::new() };
         let wrist_images = if c.wrist { Some(frames(true)?) } else { None };
         let end = self.idle_tail(k).unwrap_or(n);
+        let mut objects: Vec<Vec<ObjectAnnotation>> = frame_steps
+            .iter()
+            .map(|&f| {
+                let previous = if f == lo {
+                    before_objects
+                } else {
+                    Some(raw[f - 1 - lo].objects.as_slice())
+                };
+                let mut objects = observed_labels(previous, &raw[f - lo].objects);
+                if let Some(a) = aug.as_ref().filter(|_| c.images) {
+                    shift_boxes(&mut objects, a.dx, a.dy, c.image_size);
+                }
+                objects
+            })
+            .collect();
         let mut actions = Vec::with_capacity(tl * c.chunk * 7);
         let mut action_mask = Vec::with_capacity(tl * c.chunk);
         let mut states = Vec::with_capacity(tl * 8);
-        let noise_seed = |f: usize| mix(aug_seed ^ mix(f as u64 ^ NOISE_SALT));
-        for &f in &frame_steps {
+        for (&f, frame_objects) in frame_steps.iter().zip(&mut objects) {
             for h in 0..c.chunk {
                 let a = (f + h).min(n - 1);
                 actions.extend(self.norm.normalize(&raw[a - lo].action));
@@ -514,7 +528,8 @@ impl WindowDataset {
             }
             let mut state = raw[f - lo].state;
             if c.state_noise > 0.0 {
-                perturb_positions(c.state_noise, noise_seed(f), &mut state, &mut []);
+                let seed = mix(aug_seed ^ mix(f as u64 ^ NOISE_SALT));
+                perturb_positions(c.state_noise, seed, &mut state, frame_objects);
             }
             states.extend(state);
         }
@@ -540,25 +555,7 @@ impl WindowDataset {
                     observed_progress(previous, &raw[f - lo].progress)
                 })
                 .collect(),
-            objects: frame_steps
-                .iter()
-                .map(|&f| {
-                    let previous = if f == lo {
-                        before_objects
-                    } else {
-                        Some(raw[f - 1 - lo].objects.as_slice())
-                    };
-                    let mut objects = observed_labels(previous, &raw[f - lo].objects);
-                    if let Some(a) = aug.as_ref().filter(|_| c.images) {
-                        shift_boxes(&mut objects, a.dx, a.dy, c.image_size);
-                    }
-                    if c.state_noise > 0.0 {
-                        let mut state = raw[f - lo].state;
-                        perturb_positions(c.state_noise, noise_seed(f), &mut state, &mut objects);
-                    }
-                    objects
-                })
-                .collect(),
+            objects,
             frame_steps,
         })
     }
@@ -568,9 +565,8 @@ impl WindowDataset {
 const NOISE_SALT: u64 = 0x7374_6174_655f_6e6f;
 
 /// Adds σ-Gaussian noise (metres) to the eef position `state[0..3]`, then to the position of
-/// every object with a pose and of each of its parts, in scene order, all drawn from `seed`:
-/// the same seed perturbs the same frame identically, so the robot and the objects of one frame
-/// move by the same draws whether or not the objects are perturbed in the same call.
+/// every object with a pose and of each of its parts, in scene order, all drawn from `seed` (the
+/// same seed perturbs the same frame identically).
 pub fn perturb_positions(
     sigma: f32,
     seed: u64,

@@ -49,6 +49,24 @@ fn dataset_with(
     (dir, all)
 }
 
+/// The train split of `dir` in chunks of 4 frames (p = 3) with 2-step action chunks and no images,
+/// and the same with `variant` applied to that config.
+fn plain_and(
+    dir: &std::path::Path,
+    variant: impl FnOnce(WindowConfig) -> WindowConfig,
+) -> (WindowDataset, WindowDataset) {
+    let cfg = WindowConfig {
+        past: 3,
+        future: 0,
+        chunk: 2,
+        image_size: 16,
+        images: false,
+        ..Default::default()
+    };
+    let open = |c| WindowDataset::open(dir, Split::Train, c).unwrap();
+    (open(cfg.clone()), open(variant(cfg)))
+}
+
 #[test]
 fn normalisation_is_exact() {
     let n = ActionNorm {
@@ -371,24 +389,10 @@ fn masked_idle_tail_leaves_the_frames_but_drops_their_actions() {
             }
         }
     });
-    let cfg = WindowConfig {
-        past: 3,
-        future: 0,
-        chunk: 2,
-        image_size: 16,
-        images: false,
-        ..Default::default()
-    };
-    let plain = WindowDataset::open(dir.path(), Split::Train, cfg.clone()).unwrap();
-    let masked = WindowDataset::open(
-        dir.path(),
-        Split::Train,
-        WindowConfig {
-            mask_idle_tail: true,
-            ..cfg
-        },
-    )
-    .unwrap();
+    let (plain, masked) = plain_and(dir.path(), |c| WindowConfig {
+        mask_idle_tail: true,
+        ..c
+    });
     let ep0 = (0..2)
         .find(|&k| masked.chunk(k, 0, 0).unwrap().episode == 0)
         .unwrap();
@@ -434,25 +438,11 @@ fn state_noise_moves_positions_only_and_is_the_same_for_a_frame_in_every_chunk()
             }];
         }
     });
-    let cfg = WindowConfig {
-        past: 3,
-        future: 0,
-        chunk: 2,
-        image_size: 16,
-        images: false,
-        ..Default::default()
-    };
     let sigma = 0.01;
-    let plain = WindowDataset::open(dir.path(), Split::Train, cfg.clone()).unwrap();
-    let noisy = WindowDataset::open(
-        dir.path(),
-        Split::Train,
-        WindowConfig {
-            state_noise: sigma,
-            ..cfg
-        },
-    )
-    .unwrap();
+    let (plain, noisy) = plain_and(dir.path(), |c| WindowConfig {
+        state_noise: sigma,
+        ..c
+    });
     let (p, m) = (plain.chunk(0, 4, 0).unwrap(), noisy.chunk(0, 4, 0).unwrap());
     // Same seed, same noise; actions, masks and labels untouched.
     assert_eq!(m, noisy.chunk(0, 4, 0).unwrap());
