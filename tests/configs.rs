@@ -1,5 +1,5 @@
 //! Every config the repository ships fits the rest of the workspace: the training configs under
-//! `configs/` and `configs/state/` name tasks the simulator knows, and every run an
+//! `configs/`, `configs/state/` and `configs/gpu/` name tasks the simulator knows, and every run an
 //! experiment file under `configs/experiments/` plans (its config, its `set` overrides and each
 //! variant) loads as `eval experiment` will hand it to `train`, in the observation mode the
 //! experiment files it under.
@@ -37,7 +37,7 @@ fn check_tasks(path: &Path, cfg: &train::Config) {
 #[test]
 fn every_training_config_names_known_tasks() {
     let mut n = 0;
-    for dir in ["configs", "configs/state"] {
+    for dir in ["configs", "configs/state", "configs/gpu"] {
         for path in tomls(&e2e::repo_root().join(dir)) {
             let cfg = train::Config::load(&path)
                 .unwrap_or_else(|e| panic!("{} does not load: {e}", path.display()));
@@ -45,7 +45,7 @@ fn every_training_config_names_known_tasks() {
             n += 1;
         }
     }
-    assert!(n >= 28, "only {n} training configs found");
+    assert!(n >= 29, "only {n} training configs found");
 }
 
 #[test]

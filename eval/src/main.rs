@@ -27,6 +27,10 @@ enum PolicyArg {
     Remote(String),
 }
 
+fn parse_backend(s: &str) -> Result<model::backend::BackendKind, String> {
+    s.parse()
+}
+
 fn parse_policy(s: &str) -> Result<PolicyArg, String> {
     if s.contains("://") {
         eval::remote::parse_url(s).map_err(|e| e.to_string())?;
@@ -154,6 +158,11 @@ struct EvalArgs {
     /// [default: the run's `[eval].tasks`, else libero_mem].
     #[arg(long)]
     tasks: Option<String>,
+    /// Backend the model runs on: flex, ndarray, wgpu or cuda (the last three behind the cargo
+    /// features of the same name) [default: the one the run was trained on], e.g. `flex` to
+    /// evaluate on the CPU a run trained on a GPU.
+    #[arg(long, value_parser = parse_backend)]
+    backend: Option<model::backend::BackendKind>,
     /// Episodes per task.
     #[arg(long, default_value_t = 20)]
     episodes: usize,
@@ -301,9 +310,15 @@ fn setup(args: &EvalArgs) -> anyhow::Result<Setup> {
     if args.viz && kind != PolicyKind::Model {
         return Err(EvalError::Argument("--viz needs the model policy (`--run`)".into()).into());
     }
-    let device = match &run {
-        Some(r) => eval::run::device(r)?,
-        None => burn::prelude::Device::flex(),
+    let device = match (args.backend, &run) {
+        (Some(b), Some(_)) => model::backend::device(b).map_err(EvalError::from)?,
+        (Some(_), None) => {
+            return Err(
+                EvalError::Argument("--backend needs a model policy (`--run`)".into()).into(),
+            );
+        }
+        (None, Some(r)) => eval::run::device(r)?,
+        (None, None) => burn::prelude::Device::flex(),
     };
     let tasks = match (&args.tasks, &run) {
         (Some(t), _) => t.clone(),

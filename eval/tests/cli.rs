@@ -71,6 +71,16 @@ fn no_policy_and_model_without_run_are_exit_2() {
     assert!(err.contains("--viz needs the model policy"), "{err}");
 }
 
+#[test]
+fn backend_override_is_checked() {
+    let (code, _, err) = eval(&["--tasks", "t1", "--policy", "zero", "--backend", "flex"]);
+    assert_eq!(code, 2, "{err}");
+    assert!(err.contains("--backend needs a model policy"), "{err}");
+    let (code, _, err) = eval(&["--tasks", "t1", "--policy", "zero", "--backend", "tpu"]);
+    assert_eq!(code, 2, "{err}");
+    assert!(err.contains("unknown backend `tpu`"), "{err}");
+}
+
 /// A run directory as `train` writes it (the run contract of `model::run`), without
 /// checkpoints yet.
 fn bare_run(dir: &Path) -> model::ModelConfig {

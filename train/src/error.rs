@@ -48,6 +48,17 @@ pub enum TrainError {
         /// The error.
         source: std::io::Error,
     },
+    /// The backend could not run a step (e.g. a GPU buffer larger than the device allows, out
+    /// of memory): the step and the backend's own words.
+    #[error("step {step}: the backend failed to compute {what}: {message}")]
+    Device {
+        /// The optimiser step being computed (1-based).
+        step: u64,
+        /// What was being read back (`the loss`, `the gradient norm`).
+        what: &'static str,
+        /// The backend's error.
+        message: String,
+    },
     /// A non-finite loss (diverged training).
     #[error("loss is not finite at step {0}")]
     NonFinite(u64),
@@ -93,3 +104,23 @@ impl data::exit::BadInput for TrainError {
 
 /// Result alias of this crate.
 pub type Result<T> = std::result::Result<T, TrainError>;
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_backend_failure_names_the_step_and_is_not_bad_input() {
+        let e = TrainError::Device {
+            step: 7,
+            what: "the gradient norm",
+            message: "can't allocate buffer of size: 2147483648".into(),
+        };
+        assert_eq!(
+            e.to_string(),
+            "step 7: the backend failed to compute the gradient norm: can't allocate buffer of \
+             size: 2147483648"
+        );
+        assert_eq!(e.exit_code(), 1);
+    }
+}

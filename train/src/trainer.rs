@@ -103,19 +103,28 @@ pub fn run_dir(cfg: &Config, opts: &TrainOptions) -> PathBuf {
         .unwrap_or_else(|| Path::new("runs").join(cfg.run_name()))
 }
 
-fn scalar(x: &Tensor<1>) -> f64 {
-    x.clone().into_scalar::<f32>() as f64
+/// A loss read back to the host; a backend failure is [`TrainError::Device`] at `step`.
+fn scalar(step: u64, x: &Tensor<1>) -> Result<f64> {
+    x.clone()
+        .try_into_scalar::<f32>()
+        .map(f64::from)
+        .map_err(|e| TrainError::Device {
+            step,
+            what: "the loss",
+            message: e.to_string(),
+        })
 }
 
-fn record(step: u64, l: &Losses) -> Record {
-    Record {
+fn record(step: u64, l: &Losses) -> Result<Record> {
+    let opt = |x: &Option<Tensor<1>>| x.as_ref().map(|t| scalar(step, t)).transpose();
+    Ok(Record {
         step,
         lr: 0.0,
-        loss: scalar(&l.total),
-        action: scalar(&l.action),
-        contrastive: l.contrastive.as_ref().map(scalar),
-        window: l.window.as_ref().map(scalar),
-        slot_recon: l.slot_recon.as_ref().map(scalar),
+        loss: scalar(step, &l.total)?,
+        action: scalar(step, &l.action)?,
+        contrastive: opt(&l.contrastive)?,
+        window: opt(&l.window)?,
+        slot_recon: opt(&l.slot_recon)?,
         grad_norm: 0.0,
         time_s: 0.0,
         data_s: 0.0,
@@ -123,7 +132,7 @@ fn record(step: u64, l: &Losses) -> Record {
         backward_s: 0.0,
         optim_s: 0.0,
         stage: None,
-    }
+    })
 }
 
 fn config_error(cfg: &Config, message: String) -> TrainError {
@@ -160,7 +169,7 @@ pub fn validate(
     for chunk in indices.chunks(batch_size) {
         let batch = data.batch(val, chunk, device)?;
         let (_, losses) = model.forward(&batch)?;
-        let r = record(step, &losses);
+        let r = record(step, &losses)?;
         let w = chunk.len() as f64;
         let add = |a: Option<f64>, b: Option<f64>| match (a, b) {
             (Some(a), Some(b)) => Some(a + w * b),
@@ -483,7 +492,7 @@ pub fn train(cfg: &Config, opts: &TrainOptions) -> Result<TrainSummary> {
         if state.episodes.is_some() {
             carry = carry_out;
         }
-        let mut rec = record(state.step + 1, &losses);
+        let mut rec = record(state.step + 1, &losses)?;
         rec.data_s = data_s;
         let stage = stages::active(&t.stages, state.step).map(|(_, s)| s);
         let total = match stage {
@@ -497,7 +506,7 @@ pub fn train(cfg: &Config, opts: &TrainOptions) -> Result<TrainSummary> {
                         ),
                     )
                 })?;
-                rec.loss = scalar(&total);
+                rec.loss = scalar(state.step + 1, &total)?;
                 rec.stage = Some(s.name.clone());
                 total
             }
@@ -514,7 +523,13 @@ pub fn train(cfg: &Config, opts: &TrainOptions) -> Result<TrainSummary> {
         if let Some(s) = stage {
             stages::freeze(&model, s, &mut grads);
         }
-        rec.grad_norm = clip_global_norm(&model, &mut grads, t.grad_clip);
+        rec.grad_norm = clip_global_norm(&model, &mut grads, t.grad_clip).map_err(|message| {
+            TrainError::Device {
+                step: state.step + 1,
+                what: "the gradient norm",
+                message,
+            }
+        })?;
         rec.lr = sched.lr(state.step);
         model = optim.step(rec.lr, model, grads);
         rec.optim_s = optim_started.elapsed().as_secs_f64();
