@@ -11,20 +11,25 @@ export LIBERO_PACK_REQUIRED=1
 # The reference MCAP reader (PyPI `mcap`) checks that our episode files open in other tools;
 # `websockets` and `msgpack` run the Python policy server that eval's remote-policy test talks to.
 venv=target/mcap-venv
+# pip unpacks into TMPDIR and keeps a download cache: both on the repository's disk and no cache, so that
+# a machine with a small /tmp or little free space still installs LeRobot's torch (≈ 8 GB installed).
+piptmp="$PWD/target/pip-tmp"
+pip_install() { mkdir -p "$piptmp"; TMPDIR="$piptmp" "$1" install -q --no-cache-dir "${@:2}"; rm -rf "$piptmp"; }
 if ! "$venv/bin/python" -c "import mcap, mcap_protobuf, zstandard, websockets, msgpack" 2>/dev/null; then
   python3 -m venv "$venv"
-  "$venv/bin/pip" install -q "mcap==1.6.0" "mcap-protobuf-support==0.6.0" "zstandard==0.25.0" \
+  pip_install "$venv/bin/pip" "mcap==1.6.0" "mcap-protobuf-support==0.6.0" "zstandard==0.25.0" \
     "websockets==13.1" "msgpack==1.1.0"
 fi
 export DATA_MCAP_PYTHON="$PWD/$venv/bin/python"
 export EVAL_WS_PYTHON="$PWD/$venv/bin/python" EVAL_WS_REQUIRED=1
-# LeRobot (PyPI `lerobot` 0.4.4, the last for Python 3.11; it pulls torch: about 5 GB and 4 minutes)
+# LeRobot (PyPI `lerobot` 0.4.4, the last for Python 3.11; it pulls torch: about 8 GB installed and 4 minutes)
 # opens our LeRobot export with its own LeRobotDataset in sim's lerobot test; the ffmpeg that its
 # imageio-ffmpeg ships decodes the videos for the import half of that test.
 lrvenv=target/lerobot-venv
 if ! "$lrvenv/bin/python" -c "import lerobot.datasets.lerobot_dataset, imageio_ffmpeg" 2>/dev/null; then
   python3 -m venv "$lrvenv"
-  "$lrvenv/bin/pip" install -q "lerobot==0.4.4"
+  df -h "$PWD" | tail -1 | awk '{ print "free disk before LeRobot: " $4 }'
+  pip_install "$lrvenv/bin/pip" "lerobot==0.4.4"
 fi
 export LEROBOT_PYTHON="$PWD/$lrvenv/bin/python" LEROBOT_REQUIRED=1
 log=$(mktemp)
