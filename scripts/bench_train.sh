@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
 # Training throughput: the real trainer (`train CONFIG --bench N`) on the t3 settings (tiny
-# e_slotssm, B=8, T=16, 64², augmentation on) at 1 and 2 threads, and — when its venv is present —
+# e_slotssm, B=8, T=16, 64², augmentation on) at 1 and 2 threads and at 2 threads with two
+# data-parallel replicas (`train.replicas = 2`: half the batch each, one thread each), and — when its venv is present —
 # the PyTorch twin of the tiny model (../shared/tools/torch_twin, the yardstick; not part of the
 # product) timed in the same run, with the ratio ours / PyTorch per thread count (≤ 1: Burn no slower).
 #
@@ -24,6 +25,8 @@ for n in 1 2; do
   echo "== ours, $n thread(s): $bin $config --bench $steps --threads $n" >&2
   "$bin" "$config" --bench "$steps" --threads "$n" --quiet --json >"$out/ours_$n.json"
 done
+echo "== ours, 2 threads, 2 replicas: $bin $config --bench $steps --threads 2 --set train.replicas=2" >&2
+"$bin" "$config" --bench "$steps" --threads 2 --quiet --json --set train.replicas=2 >"$out/ours_2r.json"
 if [ -x "$py" ] && [ -f "$twin/bench.py" ]; then
   echo "== PyTorch twin: bench.py --steps 15 --warmup 3 --threads 1,2 --skip-stream --set sa_dec_hidden=64" >&2
   (cd "$twin" && "$py" bench.py --steps 15 --warmup 3 --threads 1,2 --skip-stream \
@@ -35,24 +38,25 @@ fi
 python3 - "$out" <<'EOF'
 import json, os, sys
 out = sys.argv[1]
-ours = {n: json.load(open(f"{out}/ours_{n}.json")) for n in (1, 2)}
+ours = {n: json.load(open(f"{out}/ours_{n}.json")) for n in (1, 2, "2r")}
 twin = json.load(open(f"{out}/twin.json")) if os.path.exists(f"{out}/twin.json") else None
 r = ours[1]
 print(f"trainer bench: {r['name']} ({r['variant']}, {r['params']} parameters, B={r['batch_size']}, T={r['window']}), "
       f"median of {r['steps']} steps after 3 untimed\n")
 print("| threads | step ms | data wait | forward | backward | clip+AdamW | steps/s | PyTorch twin ms | ours / twin |")
 print("|---:|---:|---:|---:|---:|---:|---:|---:|---:|")
-for n in (1, 2):
+for n in (1, 2, "2r"):
     o = ours[n]
-    key = "train_step_ms_1thread" if n == 1 else f"train_step_ms_{n}threads"
+    key = "train_step_ms_1thread" if n == 1 else "train_step_ms_2threads"
     t = twin.get(key) if twin else None
     ratio = f"{o['step_ms'] / t:.2f}" if t else "-"
-    print(f"| {n} | {o['step_ms']:.0f} | {o['data_ms']:.1f} | {o['forward_ms']:.0f} | "
+    label = "2, 2 replicas" if n == "2r" else n
+    print(f"| {label} | {o['step_ms']:.0f} | {o['data_ms']:.1f} | {o['forward_ms']:.0f} | "
           f"{o['backward_ms']:.0f} | {o['optim_ms']:.0f} | {o['steps_per_s']:.3f} | "
           f"{t if t else '-'} | {ratio} |")
-o = ours[2]
+o = ours["2r"]
 print(f"\nloader alone: {o['loader_windows_per_s']:.0f} windows/s vs the trainer's "
-      f"{o['trainer_windows_per_s']:.1f} at 2 threads "
+      f"{o['trainer_windows_per_s']:.1f} at 2 threads, 2 replicas "
       f"({o['loader_windows_per_s'] / o['trainer_windows_per_s']:.0f}×)")
 if twin:
     print(f"twin: torch {twin['torch_version']}, {twin['params']} parameters")

@@ -715,6 +715,36 @@ mod tests {
         }
     }
 
+    /// Lanes of a batch never see each other: predicting lanes 0–1 and 2–3 as two batches gives
+    /// what the batch of four gives them (data-parallel replicas split batches this way).
+    #[test]
+    fn lanes_of_a_batch_are_independent() {
+        let (_guard, device) = test_device();
+        for name in ["e_slotssm", "slotvla_h1", "slotvla_h8", "dense"] {
+            let cfg = micro(name);
+            let model = PolicyModel::new(&cfg, &device).unwrap();
+            let x = batch(&cfg, 4, 3, &device);
+            let pix = x.obs.pixels().unwrap();
+            let whole = model
+                .predict(pix.clone(), x.instruction.clone(), None)
+                .unwrap()
+                .actions;
+            let part = |i: usize| {
+                model
+                    .predict(
+                        pix.clone().narrow(0, 2 * i, 2),
+                        x.instruction.clone().narrow(0, 2 * i, 2),
+                        None,
+                    )
+                    .unwrap()
+                    .actions
+            };
+            let joined = Tensor::cat(vec![part(0), part(1)], 0);
+            let diff: f32 = (joined - whole).abs().max().into_scalar();
+            assert!(diff < 1e-4, "{name}: {diff}");
+        }
+    }
+
     #[test]
     fn two_carried_windows_equal_one_long_window() {
         let (_guard, device) = test_device();

@@ -256,6 +256,14 @@ pub struct TrainSection {
     /// starts at step 0 together and, on demos of similar length, every batch holds the same
     /// phase). Measured better on state-mode T1 and worse on LIBERO-Goal (train/README.md).
     pub stagger: bool,
+    /// Data-parallel replicas of the model (default 1): each step splits the batch into this
+    /// many groups of consecutive lanes, runs each group's forward and backward on its own
+    /// thread with its own copy of the weights, and averages their gradients before the clip and
+    /// the optimiser step (PyTorch DDP's rule: the mean of the replicas' mean losses). Divides
+    /// `batch_size`. Another count gives other numbers (each replica normalises its own losses),
+    /// the same count the same bytes.
+    #[serde(skip_serializing_if = "is_one")]
+    pub replicas: usize,
     /// Peak learning rate (AdamW).
     pub lr: f64,
     /// Linear warm-up steps (from 0 to `lr`).
@@ -289,6 +297,10 @@ pub struct TrainSection {
 
 pub use crate::stages::Stage;
 
+fn is_one(n: &usize) -> bool {
+    *n == 1
+}
+
 /// `[train].sampling`.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Default, Serialize, Deserialize)]
 #[serde(rename_all = "lowercase")]
@@ -307,6 +319,7 @@ impl Default for TrainSection {
             batch_size: 8,
             sampling: Sampling::default(),
             stagger: false,
+            replicas: 1,
             lr: 3e-4,
             warmup_steps: 500,
             final_lr_fraction: 0.0,
@@ -426,6 +439,12 @@ impl Config {
         }
         if t.batch_size == 0 {
             return bad("batch_size", "must be ≥ 1");
+        }
+        if t.replicas == 0 || !t.batch_size.is_multiple_of(t.replicas) {
+            return Err(format!(
+                "train.replicas: must be ≥ 1 and divide train.batch_size {} (got {})",
+                t.batch_size, t.replicas
+            ));
         }
         if !(t.lr > 0.0 && t.lr.is_finite()) {
             return bad("lr", "must be > 0");

@@ -25,6 +25,7 @@ pub mod dataset;
 pub mod error;
 pub mod loader;
 pub mod metrics;
+pub mod parallel;
 pub mod plot;
 pub mod schedule;
 pub mod stages;

@@ -76,32 +76,53 @@ impl Draw {
     }
 }
 
-/// One prepared batch.
+/// One data-parallel shard of a batch: a contiguous group of its lanes.
+pub struct Shard {
+    /// The model batch of these lanes (`[B / N, T, …]`).
+    pub batch: model::WindowBatch,
+    /// Lanes that start an episode (`[B / N]`), episode sampling only.
+    pub fresh: Option<Tensor<1, Bool>>,
+}
+
+/// One prepared batch, in `N` shards of consecutive lanes (one shard without data parallelism).
 pub struct Prepared {
     /// What it was drawn from.
     pub key: DrawKey,
-    /// The model batch (`[B, T, …]`).
-    pub batch: model::WindowBatch,
-    /// Lanes that start an episode (`[B]`), episode sampling only.
-    pub fresh: Option<Tensor<1, Bool>>,
+    /// The batch's lanes in `N` groups of `B / N`, in lane order.
+    pub shards: Vec<Shard>,
     /// Seconds the loader spent making it.
     pub prepare_s: f64,
 }
 
-/// Makes the batch of `key` from the training split on `device`.
-pub fn prepare(data: &RunData, key: DrawKey, device: &Device) -> Result<Prepared> {
+/// Makes the batch of `key` from the training split on `device`, in `shards` groups of
+/// consecutive lanes (`shards` divides the batch size; 1 = the whole batch).
+pub fn prepare(data: &RunData, key: DrawKey, shards: usize, device: &Device) -> Result<Prepared> {
     let started = Instant::now();
-    let (batch, fresh) = match &key {
-        DrawKey::Windows(indices) => (data.batch(&data.train, indices, device)?, None),
-        DrawKey::Episodes(spans) => {
-            let (batch, fresh) = data.chunk_batch(spans, device)?;
-            (batch, Some(fresh))
-        }
+    let shards = shards.max(1);
+    let parts = match &key {
+        DrawKey::Windows(indices) => indices
+            .chunks(indices.len().div_ceil(shards).max(1))
+            .map(|part| {
+                Ok(Shard {
+                    batch: data.batch(&data.train, part, device)?,
+                    fresh: None,
+                })
+            })
+            .collect::<Result<Vec<_>>>()?,
+        DrawKey::Episodes(spans) => spans
+            .chunks(spans.len().div_ceil(shards).max(1))
+            .map(|part| {
+                let (batch, fresh) = data.chunk_batch(part, device)?;
+                Ok(Shard {
+                    batch,
+                    fresh: Some(fresh),
+                })
+            })
+            .collect::<Result<Vec<_>>>()?,
     };
     Ok(Prepared {
         key,
-        batch,
-        fresh,
+        shards: parts,
         prepare_s: started.elapsed().as_secs_f64(),
     })
 }
@@ -113,12 +134,15 @@ pub struct Prefetcher {
 }
 
 impl Prefetcher {
-    /// Starts preparing `count` batches drawn by `draw` (a copy of the loop's sampler).
+    /// Starts preparing `count` batches drawn by `draw` (a copy of the loop's sampler), each
+    /// in `shards` lane groups.
+    #[allow(clippy::too_many_arguments)]
     pub fn spawn(
         data: Arc<RunData>,
         mut draw: Draw,
         batch_size: usize,
         window: usize,
+        shards: usize,
         count: u64,
         depth: usize,
         device: Device,
@@ -129,7 +153,7 @@ impl Prefetcher {
             .spawn(move || {
                 for _ in 0..count {
                     let key = draw.next(&data, batch_size, window);
-                    let item = prepare(&data, key, &device);
+                    let item = prepare(&data, key, shards, &device);
                     let failed = item.is_err();
                     // The receiver is gone when the loop stopped early (an error, stop_at).
                     if tx.send(item).is_err() || failed {

@@ -9,7 +9,7 @@ use serde::{Deserialize, Serialize};
 use crate::error::{Result, TrainError};
 
 /// One line of `metrics.jsonl` (training) or `val.jsonl` (validation; lr/grad_norm are 0).
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
 pub struct Record {
     /// Optimiser steps done when measured (1-based for training lines).
     pub step: u64,

@@ -29,6 +29,7 @@ use crate::dataset::{RunData, ensure_dataset};
 use crate::error::{Result, TrainError};
 use crate::loader::{self, Draw, Prefetcher};
 use crate::metrics::{self, JsonlWriter, Record};
+use crate::parallel;
 use crate::plot;
 use crate::schedule::WarmupCosine;
 use crate::stages;
@@ -275,6 +276,82 @@ pub fn open_data(cfg: &Config) -> Result<(ModelConfig, RunData)> {
     Ok((mcfg, data))
 }
 
+/// What one replica's forward and backward gave.
+struct ReplicaStep {
+    /// Its losses, read back, and its forward and backward times.
+    rec: Record,
+    /// Its gradients (of its loss scaled as asked).
+    grads: GradientsParams,
+    /// The memory after its lanes' chunk, detached.
+    carry: Carry,
+}
+
+/// Forward, losses and backward of one lane group on `model` (the whole batch without data
+/// parallelism), the loss scaled by `scale` before the backward pass.
+#[allow(clippy::too_many_arguments)]
+fn replica_step(
+    model: &PolicyModel,
+    shard: loader::Shard,
+    carry_in: Carry,
+    stage: Option<&stages::Stage>,
+    cfg: &Config,
+    mcfg: &ModelConfig,
+    step: u64,
+    scale: f64,
+) -> Result<ReplicaStep> {
+    let forward_started = Instant::now();
+    let (_, losses, carry) = model.forward_from(&shard.batch, carry_in)?;
+    let mut rec = record(step, &losses)?;
+    let total = match stage {
+        Some(s) => {
+            let total = stages::total(s, &losses, &mcfg.loss).ok_or_else(|| {
+                config_error(
+                    cfg,
+                    format!(
+                        "train.stages `{}`: the {} model computes none of its losses {:?}",
+                        s.name, cfg.model.variant, s.losses
+                    ),
+                )
+            })?;
+            rec.loss = scalar(step, &total)?;
+            rec.stage = Some(s.name.clone());
+            total
+        }
+        None => losses.total,
+    };
+    if !rec.loss.is_finite() {
+        return Err(TrainError::NonFinite(step));
+    }
+    rec.forward_s = forward_started.elapsed().as_secs_f64();
+    let backward_started = Instant::now();
+    let total = if scale == 1.0 {
+        total
+    } else {
+        total.mul_scalar(scale)
+    };
+    let grads = GradientsParams::from_grads(total.backward(), model);
+    rec.backward_s = backward_started.elapsed().as_secs_f64();
+    Ok(ReplicaStep { rec, grads, carry })
+}
+
+/// `replicas` kernel pools of `threads / replicas` threads each (at least one), where `threads`
+/// is the size of the pool the run was started in (`--threads`); none for one replica.
+fn replica_pools(replicas: usize) -> Result<Vec<rayon::ThreadPool>> {
+    if replicas <= 1 {
+        return Ok(vec![]);
+    }
+    let each = (rayon::current_num_threads() / replicas).max(1);
+    (0..replicas)
+        .map(|i| {
+            rayon::ThreadPoolBuilder::new()
+                .num_threads(each)
+                .thread_name(move |k| format!("replica-{i}-{k}"))
+                .build()
+                .map_err(|e| TrainError::Other(format!("a kernel pool for replica {i}: {e}")))
+        })
+        .collect()
+}
+
 /// Trains `cfg` (see the module docs); resumes automatically from the run directory's newest
 /// complete checkpoint.
 pub fn train(cfg: &Config, opts: &TrainOptions) -> Result<TrainSummary> {
@@ -451,11 +528,15 @@ pub fn train(cfg: &Config, opts: &TrainOptions) -> Result<TrainSummary> {
             draw,
             t.batch_size,
             window,
+            t.replicas,
             end - state.step,
             PREFETCH_DEPTH,
             ad.clone(),
         )
     });
+    // Data parallelism: one kernel pool per replica, the threads of the run's pool shared out
+    // (at least one each), so that replicas do not queue behind each other's kernels.
+    let pools = replica_pools(t.replicas)?;
     while state.step < end {
         let data_started = Instant::now();
         // With episode sampling, consecutive chunks of whole episodes: the memory of the
@@ -478,48 +559,96 @@ pub fn train(cfg: &Config, opts: &TrainOptions) -> Result<TrainSummary> {
                 }
                 prepared
             }
-            None => loader::prepare(&data, key, &ad)?,
+            None => loader::prepare(&data, key, t.replicas, &ad)?,
         };
-        let carry_in = match prepared.fresh {
-            Some(fresh) if !carry.is_empty() => carry.clone().with_fresh(fresh),
-            _ => Carry::default(),
-        };
-        let batch = prepared.batch;
         // Time the step waited for its batch (with the loader thread: ~0 once it keeps up).
         let data_s = data_started.elapsed().as_secs_f64();
-        let forward_started = Instant::now();
-        let (_, losses, carry_out) = model.forward_from(&batch, carry_in)?;
-        if state.episodes.is_some() {
-            carry = carry_out;
-        }
-        let mut rec = record(state.step + 1, &losses)?;
-        rec.data_s = data_s;
         let stage = stages::active(&t.stages, state.step).map(|(_, s)| s);
-        let total = match stage {
-            Some(s) => {
-                let total = stages::total(s, &losses, &mcfg.loss).ok_or_else(|| {
-                    config_error(
-                        &cfg,
-                        format!(
-                            "train.stages `{}`: the {} model computes none of its losses {:?}",
-                            s.name, cfg.model.variant, s.losses
-                        ),
-                    )
-                })?;
-                rec.loss = scalar(state.step + 1, &total)?;
-                rec.stage = Some(s.name.clone());
-                total
+        let replicas = prepared.shards.len();
+        let per = t.batch_size / replicas;
+        let inputs: Vec<(loader::Shard, Carry)> = prepared
+            .shards
+            .into_iter()
+            .enumerate()
+            .map(|(i, shard)| {
+                let carry_in = match &shard.fresh {
+                    Some(fresh) if !carry.is_empty() => {
+                        let lanes = if replicas == 1 {
+                            carry.clone()
+                        } else {
+                            carry.lanes(i * per, per, t.batch_size)
+                        };
+                        lanes.with_fresh(fresh.clone())
+                    }
+                    _ => Carry::default(),
+                };
+                (shard, carry_in)
+            })
+            .collect();
+        let step_no = state.step + 1;
+        let outs = if replicas == 1 {
+            let (shard, carry_in) = inputs.into_iter().next().expect("one shard");
+            vec![replica_step(
+                &model, shard, carry_in, stage, &cfg, &mcfg, step_no, 1.0,
+            )?]
+        } else {
+            // Burn initialises parameters lazily, on first use, from one seeded stream: a new
+            // model's first forward runs here, on the shared weights, so that they are drawn in
+            // the order one replica draws them (forking would draw them in module order).
+            if state.step == 0 && resumed_from.is_none() {
+                let (shard, carry_in) = &inputs[0];
+                model.forward_from(&shard.batch, carry_in.clone())?;
             }
-            None => losses.total,
+            // Each lane group on its own thread with its own copy of the weights (fresh
+            // autodiff leaves with the same parameter ids, so the graphs stay apart).
+            let scale = 1.0 / replicas as f64;
+            std::thread::scope(|scope| {
+                let handles: Vec<_> = inputs
+                    .into_iter()
+                    .zip(&pools)
+                    .map(|((shard, carry_in), pool)| {
+                        let replica = model.clone().fork(&ad);
+                        let (cfg, mcfg) = (&cfg, &mcfg);
+                        scope.spawn(move || {
+                            pool.install(|| {
+                                replica_step(
+                                    &replica, shard, carry_in, stage, cfg, mcfg, step_no, scale,
+                                )
+                            })
+                        })
+                    })
+                    .collect();
+                handles
+                    .into_iter()
+                    .map(|h| {
+                        h.join().unwrap_or_else(|_| {
+                            Err(TrainError::Other(format!(
+                                "step {step_no}: a replica's thread panicked"
+                            )))
+                        })
+                    })
+                    .collect::<Result<Vec<_>>>()
+            })?
         };
-        if !rec.loss.is_finite() {
-            return Err(TrainError::NonFinite(state.step + 1));
-        }
-        rec.forward_s = forward_started.elapsed().as_secs_f64();
-        let backward_started = Instant::now();
-        let mut grads = GradientsParams::from_grads(total.backward(), &model);
-        rec.backward_s = backward_started.elapsed().as_secs_f64();
         let optim_started = Instant::now();
+        let mut recs = Vec::with_capacity(replicas);
+        let mut grads = Vec::with_capacity(replicas);
+        let mut carries = Vec::with_capacity(replicas);
+        for o in outs {
+            recs.push(o.rec);
+            grads.push(o.grads);
+            carries.push(o.carry);
+        }
+        if state.episodes.is_some() {
+            carry = if replicas == 1 {
+                carries.pop().expect("one carry")
+            } else {
+                Carry::cat_lanes(carries)?
+            };
+        }
+        let mut rec = parallel::mean_record(recs);
+        rec.data_s = data_s;
+        let mut grads = parallel::sum_gradients(&model, grads, &ad);
         if let Some(s) = stage {
             stages::freeze(&model, s, &mut grads);
         }

@@ -220,6 +220,78 @@ fn stop_and_resume(sampling: train::config::Sampling) {
     );
 }
 
+/// Two data-parallel replicas (half the lanes each, the mean of their gradients): from the same
+/// initial weights, the loss curve follows the one-replica run's at the same global batch, and
+/// the run is as reproducible as any: resumed from its mid-way checkpoint (the carried memory
+/// joined from both halves), it ends with the uninterrupted run's bytes.
+#[test]
+fn two_replicas_follow_one_and_resume_bit_for_bit() {
+    let _g = serial();
+    let steps = 12;
+    let mut one = short_config(steps, 6);
+    one.train.sampling = train::config::Sampling::Episodes;
+    let mut two = one.clone();
+    two.train.replicas = 2;
+    let (a, b, c) = (
+        tempfile::tempdir().unwrap(),
+        tempfile::tempdir().unwrap(),
+        tempfile::tempdir().unwrap(),
+    );
+    train::train(&one, &opts(a.path())).unwrap();
+    train::train(&two, &opts(b.path())).unwrap();
+    let losses = |d: &Path| -> Vec<f64> {
+        metrics::read(&d.join("metrics.jsonl"))
+            .unwrap()
+            .iter()
+            .map(|r| r.loss)
+            .collect()
+    };
+    let (l1, l2) = (losses(a.path()), losses(b.path()));
+    assert_eq!((l1.len(), l2.len()), (steps as usize, steps as usize));
+    // These lanes have equal frame counts, so the mean of the halves' mean losses is the
+    // batch's mean loss: the curves agree to float rounding (the sums run in another order).
+    for (k, (x, y)) in l1.iter().zip(&l2).enumerate() {
+        assert!(
+            (x - y).abs() <= 1e-4 * x.abs(),
+            "step {}: one replica {x}, two {y}",
+            k + 1
+        );
+    }
+    // Stopped at the mid-way checkpoint and resumed: the uninterrupted two-replica run's bytes.
+    let stop = TrainOptions {
+        stop_at: Some(6),
+        ..opts(c.path())
+    };
+    train::train(&two, &stop).unwrap();
+    assert!(
+        c.path()
+            .join("checkpoints/step_000000006/carry.json")
+            .is_file()
+    );
+    let s = train::train(&two, &opts(c.path())).unwrap();
+    assert_eq!((s.start_step, s.step), (6, steps));
+    assert_eq!(
+        common::bits(&common::final_weights(b.path())),
+        common::bits(&common::final_weights(c.path())),
+        "resumed two-replica run differs from the uninterrupted one"
+    );
+    // A replica count that does not divide the batch is a config error.
+    let d = tempfile::tempdir().unwrap();
+    let mut three = one.clone();
+    three.train.replicas = 3;
+    let path = write_config(d.path(), &three);
+    let err = exit_2_stderr(&[
+        path.to_str().unwrap(),
+        "--run-dir",
+        d.path().join("r").to_str().unwrap(),
+    ]);
+    assert!(
+        err.contains("train.replicas: must be ≥ 1 and divide train.batch_size 8 (got 3)"),
+        "{err}"
+    );
+    assert!(err.contains("exp.toml"), "{err}");
+}
+
 #[test]
 fn kill_9_mid_run_then_resume_matches_uninterrupted_binary_run() {
     let _g = serial();

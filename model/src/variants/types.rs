@@ -206,6 +206,98 @@ pub struct CarryRecord {
 }
 
 impl Carry {
+    /// Lanes `start..start + len` of a carry over `lanes` lanes: `[B, …]` tensors narrowed on
+    /// their first axis, the SSM state's `[B·K, …]` rows of those lanes (data-parallel shards).
+    pub fn lanes(&self, start: usize, len: usize, lanes: usize) -> Carry {
+        fn rows<const D: usize>(
+            t: &Tensor<D>,
+            start: usize,
+            len: usize,
+            lanes: usize,
+        ) -> Tensor<D> {
+            let per = t.dims()[0] / lanes.max(1);
+            t.clone().narrow(0, start * per, len * per)
+        }
+        Carry {
+            slots: self.slots.as_ref().map(|t| rows(t, start, len, lanes)),
+            ssm: self.ssm.as_ref().map(|s| SlotSsmState {
+                blocks: s
+                    .blocks
+                    .iter()
+                    .map(|b| crate::mamba::MambaState {
+                        h: rows(&b.h, start, len, lanes),
+                        conv: rows(&b.conv, start, len, lanes),
+                    })
+                    .collect(),
+            }),
+            history: self.history.as_ref().map(|t| rows(t, start, len, lanes)),
+            history_valid: self
+                .history_valid
+                .as_ref()
+                .map(|t| t.clone().narrow(0, start, len)),
+            fresh: self.fresh.as_ref().map(|t| t.clone().narrow(0, start, len)),
+        }
+    }
+
+    /// Joins the carries of consecutive lane ranges into one (the inverse of [`Carry::lanes`]);
+    /// an error when the parts do not carry the same kinds of memory.
+    pub fn cat_lanes(parts: Vec<Carry>) -> Result<Carry> {
+        fn join<T>(parts: Vec<Option<T>>, what: &str) -> Result<Option<Vec<T>>> {
+            let n = parts.len();
+            let some: Vec<T> = parts.into_iter().flatten().collect();
+            match some.len() {
+                0 => Ok(None),
+                k if k == n => Ok(Some(some)),
+                k => Err(ModelError::Input(format!(
+                    "carried {what}: {k} of {n} lane groups have it"
+                ))),
+            }
+        }
+        let mut slots = vec![];
+        let mut ssm = vec![];
+        let mut history = vec![];
+        let mut valid = vec![];
+        let mut fresh = vec![];
+        for c in parts {
+            slots.push(c.slots);
+            ssm.push(c.ssm);
+            history.push(c.history);
+            valid.push(c.history_valid);
+            fresh.push(c.fresh);
+        }
+        let ssm = join(ssm, "SSM state")?
+            .map(|states| -> Result<SlotSsmState> {
+                let blocks = states[0].blocks.len();
+                if states.iter().any(|s| s.blocks.len() != blocks) {
+                    return Err(ModelError::Input(
+                        "carried SSM state: lane groups differ in block count".into(),
+                    ));
+                }
+                Ok(SlotSsmState {
+                    blocks: (0..blocks)
+                        .map(|i| crate::mamba::MambaState {
+                            h: Tensor::cat(
+                                states.iter().map(|s| s.blocks[i].h.clone()).collect(),
+                                0,
+                            ),
+                            conv: Tensor::cat(
+                                states.iter().map(|s| s.blocks[i].conv.clone()).collect(),
+                                0,
+                            ),
+                        })
+                        .collect(),
+                })
+            })
+            .transpose()?;
+        Ok(Carry {
+            slots: join(slots, "slots")?.map(|v| Tensor::cat(v, 0)),
+            ssm,
+            history: join(history, "history")?.map(|v| Tensor::cat(v, 0)),
+            history_valid: join(valid, "history validity")?.map(|v| Tensor::cat(v, 0)),
+            fresh: join(fresh, "episode starts")?.map(|v| Tensor::cat(v, 0)),
+        })
+    }
+
     /// Whether nothing is carried (every lane starts fresh).
     pub fn is_empty(&self) -> bool {
         self.slots.is_none() && self.ssm.is_none() && self.history.is_none()
@@ -274,5 +366,77 @@ impl Carry {
                 .transpose()?,
             fresh: None,
         })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn seq(shape: [usize; 3], device: &Device) -> Tensor<3> {
+        let n: usize = shape.iter().product();
+        let values: Vec<f32> = (0..n).map(|i| i as f32).collect();
+        Tensor::<1>::from_floats(values.as_slice(), device).reshape(shape)
+    }
+
+    #[test]
+    fn lane_groups_split_and_join_back() {
+        let device = Device::flex();
+        // 4 lanes, K = 3 slots of width 2; SSM rows are lane-major (B·K).
+        let carry = Carry {
+            slots: Some(seq([4, 3, 2], &device)),
+            ssm: Some(SlotSsmState {
+                blocks: vec![crate::mamba::MambaState {
+                    h: seq([12, 2, 5], &device),
+                    conv: seq([12, 2, 3], &device),
+                }],
+            }),
+            history: None,
+            history_valid: None,
+            fresh: Some(Tensor::from_data(
+                TensorData::new(vec![true, false, false, true], [4]),
+                &device,
+            )),
+        };
+        let a = carry.lanes(0, 3, 4);
+        let b = carry.lanes(3, 1, 4);
+        assert_eq!(a.slots.as_ref().unwrap().dims(), [3, 3, 2]);
+        assert_eq!(b.ssm.as_ref().unwrap().blocks[0].h.dims(), [3, 2, 5]);
+        // Lane 3's SSM rows are rows 9..12 of the whole: its first value is 9 · 2 · 5.
+        let first = b.ssm.as_ref().unwrap().blocks[0]
+            .h
+            .clone()
+            .flatten::<1>(0, 2)
+            .into_data()
+            .try_to_vec::<f32>()
+            .unwrap()[0];
+        assert_eq!(first, 90.0);
+        assert_eq!(
+            b.fresh
+                .clone()
+                .unwrap()
+                .into_data()
+                .try_to_vec::<bool>()
+                .unwrap(),
+            vec![true]
+        );
+        let joined = Carry::cat_lanes(vec![a, b]).unwrap();
+        assert_eq!(joined.to_record(), carry.to_record());
+        assert_eq!(
+            joined
+                .fresh
+                .unwrap()
+                .into_data()
+                .try_to_vec::<bool>()
+                .unwrap(),
+            vec![true, false, false, true]
+        );
+        // Parts that disagree on what they carry are refused.
+        let bare = Carry::default();
+        let err = Carry::cat_lanes(vec![carry.lanes(0, 2, 4), bare]).unwrap_err();
+        assert!(
+            err.to_string().contains("1 of 2 lane groups have it"),
+            "{err}"
+        );
     }
 }
