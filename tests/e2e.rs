@@ -43,7 +43,7 @@ fn generate_train_eval_t1() {
     // 3. Evaluate 2 rollouts of the checkpoint, recorded, with slot overlays of the first.
     let run = eval::RunDir::open(&run_dir).unwrap();
     assert_eq!(run.step, 120);
-    let device = eval::run::device(&run).unwrap();
+    let device = eval::run::device(&run, None).unwrap();
     let out = tmp.path().join("eval");
     let eval_cfg = eval::EvalConfig {
         episodes: 2,

@@ -66,7 +66,7 @@ fn round_trip(obs: train::config::ObsMode) {
     )
     .unwrap();
     let run = eval::RunDir::open(&run_dir).unwrap();
-    let device = eval::run::device(&run).unwrap();
+    let device = eval::run::device(&run, None).unwrap();
     let tasks = vec![task];
     let eval_cfg = EvalConfig {
         episodes: 2,

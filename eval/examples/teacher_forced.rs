@@ -16,7 +16,7 @@ fn main() -> anyhow::Result<()> {
     };
     let every: usize = rest.first().map_or(Ok(16), |s| s.parse())?;
     let rd = eval::run::open(run)?;
-    let device = eval::run::device(&rd)?;
+    let device = eval::run::device(&rd, None)?;
     let mut policy = eval::run::policy(&rd, &device)?;
     let reader = data::EpisodeReader::open(episode).with_context(|| episode.clone())?;
     let meta = reader.meta().clone();

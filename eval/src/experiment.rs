@@ -105,6 +105,8 @@ pub struct RunSpec {
 pub struct Planned<'a> {
     /// Its group.
     pub spec: &'a RunSpec,
+    /// Its group's position in `runs` (what errors name as `runs[i]`).
+    pub group: usize,
     /// Run name (its directory under `runs_dir`).
     pub name: String,
     /// Variant trained.
@@ -176,11 +178,7 @@ impl Experiment {
         // Two plans of one run would train one directory twice and count it twice in the tables.
         let mut first: std::collections::HashMap<String, usize> = std::collections::HashMap::new();
         for p in x.plan() {
-            let i = x
-                .runs
-                .iter()
-                .position(|r| std::ptr::eq(r, p.spec))
-                .expect("planned from these runs");
+            let i = p.group;
             if let Some(&j) = first.get(&p.name) {
                 return Err(bad(format!(
                     "runs[{i}]: run `{}` is planned twice (also by runs[{j}]: the same obs, suite, \
@@ -203,7 +201,7 @@ impl Experiment {
     /// Every (group, variant) pair, in file order.
     pub fn plan(&self) -> Vec<Planned<'_>> {
         let mut out = Vec::new();
-        for r in &self.runs {
+        for (group, r) in self.runs.iter().enumerate() {
             for v in &r.variants {
                 let mut name = format!("{}_{}_{}_{}", self.name, r.obs, slug(&r.suite), v);
                 let mut label = v.clone();
@@ -214,6 +212,7 @@ impl Experiment {
                 }
                 out.push(Planned {
                     spec: r,
+                    group,
                     name: name.clone(),
                     variant: v.clone(),
                     label: label.clone(),
@@ -222,6 +221,7 @@ impl Experiment {
                 for &seed in &r.seeds {
                     out.push(Planned {
                         spec: r,
+                        group,
                         name: format!("{name}_seed{seed}"),
                         variant: v.clone(),
                         label: format!("{label}+seed{seed}"),

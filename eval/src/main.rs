@@ -120,6 +120,9 @@ enum Command {
         /// Stop after this many connections have ended [default: serve until killed].
         #[arg(long)]
         connections: Option<usize>,
+        /// Backend to run the policy on: flex, ndarray, wgpu, cuda [default: the run's own].
+        #[arg(long, value_parser = parse_backend)]
+        backend: Option<model::backend::BackendKind>,
     },
     /// Temporal scaling: evaluate the repetition family at several repetition counts N.
     Scaling {
@@ -241,7 +244,8 @@ fn main() -> ExitCode {
             host,
             port,
             connections,
-        }) => serve(&run, &host, port, connections),
+            backend,
+        }) => serve(&run, &host, port, connections, backend),
         Some(Command::Scaling { repeats, eval }) => scaling(&eval, &repeats),
         Some(Command::Experiment {
             file,
@@ -310,15 +314,14 @@ fn setup(args: &EvalArgs) -> anyhow::Result<Setup> {
     if args.viz && kind != PolicyKind::Model {
         return Err(EvalError::Argument("--viz needs the model policy (`--run`)".into()).into());
     }
-    let device = match (args.backend, &run) {
-        (Some(b), Some(_)) => model::backend::device(b).map_err(EvalError::from)?,
-        (Some(_), None) => {
+    let device = match &run {
+        Some(r) => eval::run::device(r, args.backend)?,
+        None if args.backend.is_some() => {
             return Err(
                 EvalError::Argument("--backend needs a model policy (`--run`)".into()).into(),
             );
         }
-        (None, Some(r)) => eval::run::device(r)?,
-        (None, None) => burn::prelude::Device::flex(),
+        None => burn::prelude::Device::flex(),
     };
     let tasks = match (&args.tasks, &run) {
         (Some(t), _) => t.clone(),
@@ -603,9 +606,10 @@ fn serve(
     host: &str,
     port: u16,
     connections: Option<usize>,
+    backend: Option<model::backend::BackendKind>,
 ) -> anyhow::Result<()> {
     let rd = eval::run::open(run)?;
-    let device = eval::run::device(&rd)?;
+    let device = eval::run::device(&rd, backend)?;
     // Loaded once up front, so a run that cannot serve fails here (exit 2), not per connection.
     eval::run::policy(&rd, &device)?;
     let listener = std::net::TcpListener::bind((host, port))
@@ -804,7 +808,7 @@ fn experiment(
             exp::train(p, &x.runs_dir)?;
         }
         let rd = eval::run::open(&run)?;
-        let device = eval::run::device(&rd)?;
+        let device = eval::run::device(&rd, None)?;
         let tasks = eval::resolve_tasks(&p.spec.suite, None)?;
         let cfg = EvalConfig {
             episodes: x.episodes,

@@ -43,9 +43,13 @@ pub fn open(dir: impl AsRef<Path>) -> Result<RunDir, EvalError> {
     Ok(run)
 }
 
-/// The device a run evaluates on by default (the backend it was trained on).
-pub fn device(run: &RunDir) -> Result<Device, EvalError> {
-    Ok(model::backend::device(run.info.backend)?)
+/// The device a run evaluates on: `backend` when given (`--backend`), else the backend it was
+/// trained on; an error when this binary lacks it.
+pub fn device(
+    run: &RunDir,
+    backend: Option<model::backend::BackendKind>,
+) -> Result<Device, EvalError> {
+    Ok(model::backend::device(backend.unwrap_or(run.info.backend))?)
 }
 
 /// A fresh streaming policy of `run` on `device`.

@@ -136,6 +136,31 @@ fn checkpoint_of_another_model_is_exit_2() {
     );
 }
 
+/// `eval serve --backend` picks the device the served policy runs on; one this binary lacks is
+/// exit 2 naming it, before anything listens.
+#[test]
+fn serve_backend_override_is_checked() {
+    let tmp = tempfile::tempdir().unwrap();
+    let run = tmp.path().join("run");
+    let model = bare_run(&run);
+    let ck = run.join("checkpoints").join("step_000000010");
+    std::fs::create_dir_all(&ck).unwrap();
+    let state = serde_json::json!({ "step": 10, "model": model });
+    std::fs::write(ck.join("state.json"), state.to_string()).unwrap();
+    std::fs::write(ck.join("model.bpk"), b"not weights").unwrap();
+    let run = run.to_str().unwrap();
+    let (code, _, err) = eval(&["serve", "--run", run, "--port", "0", "--backend", "cuda"]);
+    assert_eq!(code, 2, "{err}");
+    assert!(err.contains("cuda") && !err.contains("serving"), "{err}");
+    let (code, _, err) = eval(&["serve", "--run", run, "--backend", "tpu"]);
+    assert_eq!(code, 2, "{err}");
+    assert!(err.contains("unknown backend `tpu`"), "{err}");
+    // On the CPU backend it gets as far as loading the (unreadable) weights.
+    let (code, _, err) = eval(&["serve", "--run", run, "--port", "0", "--backend", "flex"]);
+    assert_eq!(code, 2, "{err}");
+    assert!(err.contains("model.bpk"), "{err}");
+}
+
 #[test]
 fn compare_reads_results_and_rejects_garbage() {
     let tmp = tempfile::tempdir().unwrap();
