@@ -111,23 +111,25 @@ fn run_without_checkpoint_is_exit_2() {
     assert!(err.contains("no such run directory"), "{err}");
 }
 
+/// A step-10 checkpoint in `run` whose state names `model` and whose weights are not weights.
+fn unreadable_checkpoint(run: &Path, model: &model::ModelConfig) {
+    let ck = run.join("checkpoints").join("step_000000010");
+    std::fs::create_dir_all(&ck).unwrap();
+    let state = serde_json::json!({ "step": 10, "model": model });
+    std::fs::write(ck.join("state.json"), state.to_string()).unwrap();
+    std::fs::write(ck.join("model.bpk"), b"not weights").unwrap();
+}
+
 #[test]
 fn checkpoint_of_another_model_is_exit_2() {
     let tmp = tempfile::tempdir().unwrap();
     let run = tmp.path().join("run");
     let model = bare_run(&run);
-    let ck = run.join("checkpoints").join("step_000000010");
-    std::fs::create_dir_all(&ck).unwrap();
     let other = model::ModelConfig {
         variant: model::Variant::SlotVla { history: 8 },
         ..model
     };
-    let state = serde_json::json!({
-        "step": 10,
-        "model": other,
-    });
-    std::fs::write(ck.join("state.json"), state.to_string()).unwrap();
-    std::fs::write(ck.join("model.bpk"), b"not weights").unwrap();
+    unreadable_checkpoint(&run, &other);
     let (code, _, err) = eval(&["--run", run.to_str().unwrap(), "--tasks", "t1"]);
     assert_eq!(code, 2, "{err}");
     assert!(
@@ -143,11 +145,7 @@ fn serve_backend_override_is_checked() {
     let tmp = tempfile::tempdir().unwrap();
     let run = tmp.path().join("run");
     let model = bare_run(&run);
-    let ck = run.join("checkpoints").join("step_000000010");
-    std::fs::create_dir_all(&ck).unwrap();
-    let state = serde_json::json!({ "step": 10, "model": model });
-    std::fs::write(ck.join("state.json"), state.to_string()).unwrap();
-    std::fs::write(ck.join("model.bpk"), b"not weights").unwrap();
+    unreadable_checkpoint(&run, &model);
     let run = run.to_str().unwrap();
     let (code, _, err) = eval(&["serve", "--run", run, "--port", "0", "--backend", "cuda"]);
     assert_eq!(code, 2, "{err}");

@@ -212,6 +212,37 @@ impl PolicyModel {
             .map(|(out, losses, _)| (out, losses))
     }
 
+    /// The weights of the action loss's entries: the batch's action mask (else its frame mask
+    /// over the whole chunk), the gripper column weighted by `loss.gripper`.
+    ///
+    /// # Shapes
+    /// - → `[B, T, H_a, A]`
+    fn action_mask(&self, batch: &WindowBatch) -> Tensor<4> {
+        let cfg = &self.config;
+        let [b, t] = batch.frame_mask.dims();
+        let (ha, a) = (cfg.decoder.horizon, cfg.decoder.action_dim);
+        let mask = batch.action_mask.clone().unwrap_or_else(|| {
+            batch
+                .frame_mask
+                .clone()
+                .reshape([b, t, 1, 1])
+                .repeat_dim(2, ha)
+                .repeat_dim(3, a)
+        });
+        losses::weight_gripper(mask, cfg.loss.gripper)
+    }
+
+    /// The total weight of the action loss's entries in `batch` (the denominator of its masked
+    /// mean): data-parallel replicas weight their losses by their shares of it, so that their
+    /// sum is the whole batch's action loss.
+    pub fn action_mass(&self, batch: &WindowBatch) -> Result<f64> {
+        self.action_mask(batch)
+            .sum()
+            .try_into_scalar::<f32>()
+            .map(f64::from)
+            .map_err(|e| ModelError::Input(format!("action mask: {e:?}")))
+    }
+
     /// Training forward from carried memory (truncated BPTT); also returns the memory after
     /// the window, detached.
     pub fn forward_from(
@@ -236,14 +267,7 @@ impl PolicyModel {
             carry,
         )?;
         let frame_mask = batch.frame_mask.clone();
-        let action_mask = batch.action_mask.clone().unwrap_or_else(|| {
-            frame_mask
-                .clone()
-                .reshape([b, t, 1, 1])
-                .repeat_dim(2, ha)
-                .repeat_dim(3, a)
-        });
-        let action_mask = losses::weight_gripper(action_mask, cfg.loss.gripper);
+        let action_mask = self.action_mask(batch);
         let action = match (cfg.decoder.head, &out.logits) {
             (ActionHead::Bins, Some(logits)) => {
                 losses::action_ce(logits.clone(), batch.actions.clone(), action_mask)
@@ -743,6 +767,51 @@ mod tests {
             let diff: f32 = (joined - whole).abs().max().into_scalar();
             assert!(diff < 1e-4, "{name}: {diff}");
         }
+    }
+
+    /// Halves of a batch with different numbers of valid frames (the last frame of the last
+    /// lane is padding), weighted by their shares of the action mass, give the batch's action loss.
+    #[test]
+    fn halves_weighted_by_action_mass_give_the_batch_action_loss() {
+        let (_guard, device) = test_device();
+        let cfg = micro("e_slotssm");
+        let model = PolicyModel::new(&cfg, &device).unwrap();
+        let x = batch(&cfg, 4, 3, &device);
+        let half = |i: usize| WindowBatch {
+            obs: x.obs.pixels().unwrap().narrow(0, 2 * i, 2).into(),
+            actions: x.actions.clone().narrow(0, 2 * i, 2),
+            frame_mask: x.frame_mask.clone().narrow(0, 2 * i, 2),
+            action_mask: None,
+            instruction: x.instruction.clone().narrow(0, 2 * i, 2),
+            subgoal: None,
+        };
+        let whole = WindowBatch {
+            subgoal: None,
+            ..x.clone()
+        };
+        let (_, all, _) = model.forward_from(&whole, Carry::default()).unwrap();
+        let masses: Vec<f64> = (0..2)
+            .map(|i| model.action_mass(&half(i)).unwrap())
+            .collect();
+        let (ha, a) = (cfg.decoder.horizon, cfg.decoder.action_dim);
+        assert_eq!(masses, vec![(6 * ha * a) as f64, (5 * ha * a) as f64]);
+        let total: f64 = masses.iter().sum();
+        let weighted: f64 = (0..2)
+            .map(|i| {
+                let (_, l, _) = model.forward_from(&half(i), Carry::default()).unwrap();
+                masses[i] / total * f64::from(scalar(l.action))
+            })
+            .sum();
+        let plain_mean: f64 = (0..2)
+            .map(|i| {
+                let (_, l, _) = model.forward_from(&half(i), Carry::default()).unwrap();
+                0.5 * f64::from(scalar(l.action))
+            })
+            .sum();
+        let want = f64::from(scalar(all.action));
+        assert!((weighted - want).abs() < 1e-5, "{weighted} vs {want}");
+        // The plain mean of the halves' means is another number.
+        assert!((plain_mean - want).abs() > 1e-4, "{plain_mean} vs {want}");
     }
 
     #[test]

@@ -258,10 +258,11 @@ pub struct TrainSection {
     pub stagger: bool,
     /// Data-parallel replicas of the model (default 1): each step splits the batch into this
     /// many groups of consecutive lanes, runs each group's forward and backward on its own
-    /// thread with its own copy of the weights, and averages their gradients before the clip and
-    /// the optimiser step (PyTorch DDP's rule: the mean of the replicas' mean losses). Divides
-    /// `batch_size`. Another count gives other numbers (each replica normalises its own losses),
-    /// the same count the same bytes.
+    /// thread with its own copy of the weights, and sums their gradients, each replica's loss
+    /// weighted by its share of the batch's action mass, before the clip and the optimiser step.
+    /// Divides `batch_size`. The action loss is then the batch's; the other losses are each
+    /// replica's own means, weighted alike, so another count gives slightly other numbers, the
+    /// same count the same bytes.
     #[serde(skip_serializing_if = "is_one")]
     pub replicas: usize,
     /// Peak learning rate (AdamW).

@@ -1,7 +1,8 @@
 //! Data-parallel replicas within one process: each lane group's gradients come from its own copy
-//! of the weights, and Burn's `MultiGradientsParams` sums them per parameter before the global
-//! clip and the optimiser step (which need the summed gradient, so the sum is taken here rather
-//! than inside `ModuleOptimizer::step_multi`).
+//! of the weights (its loss weighted by its share of the batch's action mass), and Burn's
+//! `MultiGradientsParams` sums them per parameter before the global clip and the optimiser step
+//! (which need the summed gradient, so the sum is taken here rather than inside
+//! `ModuleOptimizer::step_multi`).
 
 use burn::module::{Module, ModuleVisitor, Param};
 use burn::optim::{GradientsParams, MultiGradientsParams};
@@ -44,28 +45,37 @@ pub fn sum_gradients<M: Module>(
     out
 }
 
-/// The replicas' step records as one: losses averaged (the loss that was optimised is their
-/// mean), forward and backward times the slowest replica's (they ran side by side).
-pub fn mean_record(mut recs: Vec<Record>) -> Record {
-    let n = recs.len() as f64;
-    let mut out = recs.remove(0);
-    if recs.is_empty() {
-        return out;
+/// Each replica's weight in the step's loss: its share of the batch's action mass (the
+/// denominator of the masked action loss), so that the weighted sum of the replicas' mean action
+/// losses is the whole batch's; equal shares when the batch has no action entries at all.
+pub fn replica_weights(masses: &[f64]) -> Vec<f64> {
+    let total: f64 = masses.iter().sum();
+    if total > 0.0 {
+        masses.iter().map(|m| m / total).collect()
+    } else {
+        vec![1.0 / masses.len().max(1) as f64; masses.len()]
     }
-    let mean = |first: f64, rest: &mut dyn Iterator<Item = f64>| (first + rest.sum::<f64>()) / n;
-    let opt_mean = |first: Option<f64>, rest: Vec<Option<f64>>| {
-        let rest: Option<Vec<f64>> = rest.into_iter().collect();
-        Some((first? + rest?.iter().sum::<f64>()) / n)
+}
+
+/// The replicas' step records, each with its weight, as one: losses weighted as the step's loss
+/// was, forward and backward times the slowest replica's (they ran side by side).
+pub fn mean_record(mut recs: Vec<(Record, f64)>) -> Record {
+    if recs.len() == 1 {
+        return recs.remove(0).0;
+    }
+    let sum = |f: &dyn Fn(&Record) -> f64| recs.iter().map(|(r, w)| w * f(r)).sum::<f64>();
+    let opt = |f: &dyn Fn(&Record) -> Option<f64>| {
+        recs.iter()
+            .map(|(r, w)| f(r).map(|x| w * x))
+            .sum::<Option<f64>>()
     };
-    out.loss = mean(out.loss, &mut recs.iter().map(|r| r.loss));
-    out.action = mean(out.action, &mut recs.iter().map(|r| r.action));
-    out.contrastive = opt_mean(
-        out.contrastive,
-        recs.iter().map(|r| r.contrastive).collect(),
-    );
-    out.window = opt_mean(out.window, recs.iter().map(|r| r.window).collect());
-    out.slot_recon = opt_mean(out.slot_recon, recs.iter().map(|r| r.slot_recon).collect());
-    for r in &recs {
+    let mut out = recs[0].0.clone();
+    out.loss = sum(&|r| r.loss);
+    out.action = sum(&|r| r.action);
+    out.contrastive = opt(&|r| r.contrastive);
+    out.window = opt(&|r| r.window);
+    out.slot_recon = opt(&|r| r.slot_recon);
+    for (r, _) in &recs {
         out.forward_s = out.forward_s.max(r.forward_s);
         out.backward_s = out.backward_s.max(r.backward_s);
     }
@@ -122,7 +132,7 @@ mod tests {
     }
 
     #[test]
-    fn records_average_losses_and_keep_the_slowest_times() {
+    fn records_weigh_losses_and_keep_the_slowest_times() {
         let rec = |loss: f64, win: Option<f64>, fwd: f64| Record {
             loss,
             action: loss / 2.0,
@@ -130,11 +140,18 @@ mod tests {
             forward_s: fwd,
             ..Record::default()
         };
-        let m = mean_record(vec![rec(1.0, Some(0.2), 0.5), rec(3.0, Some(0.4), 0.7)]);
-        assert_eq!(m.loss, 2.0);
-        assert_eq!(m.action, 1.0);
-        assert!((m.window.unwrap() - 0.3).abs() < 1e-12);
+        let w = replica_weights(&[30.0, 10.0]);
+        assert_eq!(w, vec![0.75, 0.25]);
+        let m = mean_record(vec![
+            (rec(1.0, Some(0.2), 0.5), w[0]),
+            (rec(3.0, Some(0.4), 0.7), w[1]),
+        ]);
+        assert_eq!(m.loss, 1.5);
+        assert_eq!(m.action, 0.75);
+        assert!((m.window.unwrap() - 0.25).abs() < 1e-12);
         assert_eq!(m.contrastive, None);
         assert_eq!(m.forward_s, 0.7);
+        // No action entries anywhere: equal weights.
+        assert_eq!(replica_weights(&[0.0, 0.0]), vec![0.5, 0.5]);
     }
 }

@@ -284,6 +284,8 @@ struct ReplicaStep {
     grads: GradientsParams,
     /// The memory after its lanes' chunk, detached.
     carry: Carry,
+    /// The factor its loss was scaled by (its weight in the step's loss).
+    scale: f64,
 }
 
 /// Forward, losses and backward of one lane group on `model` (the whole batch without data
@@ -331,7 +333,12 @@ fn replica_step(
     };
     let grads = GradientsParams::from_grads(total.backward(), model);
     rec.backward_s = backward_started.elapsed().as_secs_f64();
-    Ok(ReplicaStep { rec, grads, carry })
+    Ok(ReplicaStep {
+        rec,
+        grads,
+        carry,
+        scale,
+    })
 }
 
 /// `replicas` kernel pools of `threads / replicas` threads each (at least one), where `threads`
@@ -601,12 +608,18 @@ pub fn train(cfg: &Config, opts: &TrainOptions) -> Result<TrainSummary> {
             }
             // Each lane group on its own thread with its own copy of the weights (fresh
             // autodiff leaves with the same parameter ids, so the graphs stay apart).
-            let scale = 1.0 / replicas as f64;
+            let scales = parallel::replica_weights(
+                &inputs
+                    .iter()
+                    .map(|(shard, _)| model.action_mass(&shard.batch))
+                    .collect::<std::result::Result<Vec<_>, _>>()?,
+            );
             std::thread::scope(|scope| {
                 let handles: Vec<_> = inputs
                     .into_iter()
                     .zip(&pools)
-                    .map(|((shard, carry_in), pool)| {
+                    .zip(scales)
+                    .map(|(((shard, carry_in), pool), scale)| {
                         let replica = model.clone().fork(&ad);
                         let (cfg, mcfg) = (&cfg, &mcfg);
                         scope.spawn(move || {
@@ -635,7 +648,7 @@ pub fn train(cfg: &Config, opts: &TrainOptions) -> Result<TrainSummary> {
         let mut grads = Vec::with_capacity(replicas);
         let mut carries = Vec::with_capacity(replicas);
         for o in outs {
-            recs.push(o.rec);
+            recs.push((o.rec, o.scale));
             grads.push(o.grads);
             carries.push(o.carry);
         }
