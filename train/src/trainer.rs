@@ -284,8 +284,6 @@ struct ReplicaStep {
     grads: GradientsParams,
     /// The memory after its lanes' chunk, detached.
     carry: Carry,
-    /// The factor its loss was scaled by (its weight in the step's loss).
-    scale: f64,
 }
 
 /// Forward, losses and backward of one lane group on `model` (the whole batch without data
@@ -333,12 +331,7 @@ fn replica_step(
     };
     let grads = GradientsParams::from_grads(total.backward(), model);
     rec.backward_s = backward_started.elapsed().as_secs_f64();
-    Ok(ReplicaStep {
-        rec,
-        grads,
-        carry,
-        scale,
-    })
+    Ok(ReplicaStep { rec, grads, carry })
 }
 
 /// `replicas` kernel pools of `threads / replicas` threads each (at least one), where `threads`
@@ -579,24 +572,30 @@ pub fn train(cfg: &Config, opts: &TrainOptions) -> Result<TrainSummary> {
             .enumerate()
             .map(|(i, shard)| {
                 let carry_in = match &shard.fresh {
-                    Some(fresh) if !carry.is_empty() => {
-                        let lanes = if replicas == 1 {
-                            carry.clone()
-                        } else {
-                            carry.lanes(i * per, per, t.batch_size)
-                        };
-                        lanes.with_fresh(fresh.clone())
-                    }
+                    Some(fresh) if !carry.is_empty() => carry
+                        .lanes(i * per, per, t.batch_size)
+                        .with_fresh(fresh.clone()),
                     _ => Carry::default(),
                 };
                 (shard, carry_in)
             })
             .collect();
         let step_no = state.step + 1;
+        // Each replica's weight in the step's loss (its share of the action mass).
+        let scales = if replicas == 1 {
+            vec![1.0]
+        } else {
+            parallel::replica_weights(
+                &inputs
+                    .iter()
+                    .map(|(shard, _)| model.action_mass(&shard.batch))
+                    .collect::<std::result::Result<Vec<_>, _>>()?,
+            )
+        };
         let outs = if replicas == 1 {
             let (shard, carry_in) = inputs.into_iter().next().expect("one shard");
             vec![replica_step(
-                &model, shard, carry_in, stage, &cfg, &mcfg, step_no, 1.0,
+                &model, shard, carry_in, stage, &cfg, &mcfg, step_no, scales[0],
             )?]
         } else {
             // Burn initialises parameters lazily, on first use, from one seeded stream: a new
@@ -608,17 +607,11 @@ pub fn train(cfg: &Config, opts: &TrainOptions) -> Result<TrainSummary> {
             }
             // Each lane group on its own thread with its own copy of the weights (fresh
             // autodiff leaves with the same parameter ids, so the graphs stay apart).
-            let scales = parallel::replica_weights(
-                &inputs
-                    .iter()
-                    .map(|(shard, _)| model.action_mass(&shard.batch))
-                    .collect::<std::result::Result<Vec<_>, _>>()?,
-            );
             std::thread::scope(|scope| {
                 let handles: Vec<_> = inputs
                     .into_iter()
                     .zip(&pools)
-                    .zip(scales)
+                    .zip(scales.iter().copied())
                     .map(|(((shard, carry_in), pool), scale)| {
                         let replica = model.clone().fork(&ad);
                         let (cfg, mcfg) = (&cfg, &mcfg);
@@ -647,17 +640,13 @@ pub fn train(cfg: &Config, opts: &TrainOptions) -> Result<TrainSummary> {
         let mut recs = Vec::with_capacity(replicas);
         let mut grads = Vec::with_capacity(replicas);
         let mut carries = Vec::with_capacity(replicas);
-        for o in outs {
-            recs.push((o.rec, o.scale));
+        for (o, scale) in outs.into_iter().zip(scales) {
+            recs.push((o.rec, scale));
             grads.push(o.grads);
             carries.push(o.carry);
         }
         if state.episodes.is_some() {
-            carry = if replicas == 1 {
-                carries.pop().expect("one carry")
-            } else {
-                Carry::cat_lanes(carries)?
-            };
+            carry = Carry::cat_lanes(carries)?;
         }
         let mut rec = parallel::mean_record(recs);
         rec.data_s = data_s;
