@@ -22,14 +22,19 @@ if ! "$venv/bin/python" -c "import mcap, mcap_protobuf, zstandard, websockets, m
 fi
 export DATA_MCAP_PYTHON="$PWD/$venv/bin/python"
 export EVAL_WS_PYTHON="$PWD/$venv/bin/python" EVAL_WS_REQUIRED=1
-# LeRobot (PyPI `lerobot` 0.4.4, the last for Python 3.11; it pulls torch: about 8 GB installed and 4 minutes)
+# LeRobot (PyPI `lerobot` 0.4.4, the last for Python 3.11; with torch about 6 GB installed and 4 minutes)
 # opens our LeRobot export with its own LeRobotDataset in sim's lerobot test; the ffmpeg that its
-# imageio-ffmpeg ships decodes the videos for the import half of that test.
+# imageio-ffmpeg ships decodes the videos for the import half of that test. The pinned list leaves out
+# what nothing here loads (scripts/lerobot-requirements.txt says what); the large wheels go in one at
+# a time, so the disk holds at most one downloaded wheel beside what is installed.
 lrvenv=target/lerobot-venv
+lrreq=scripts/lerobot-requirements.txt
 if ! "$lrvenv/bin/python" -c "import lerobot.datasets.lerobot_dataset, imageio_ffmpeg" 2>/dev/null; then
+  rm -rf "$lrvenv"
   python3 -m venv "$lrvenv"
   df -h "$PWD" | tail -1 | awk '{ print "free disk before LeRobot: " $4 }'
-  pip_install "$lrvenv/bin/pip" "lerobot==0.4.4"
+  for pin in $(grep -E '^(nvidia-|torch==)' "$lrreq"); do pip_install "$lrvenv/bin/pip" --no-deps "$pin"; done
+  pip_install "$lrvenv/bin/pip" --no-deps -r <(grep -v -E '^(#|nvidia-|torch==)' "$lrreq")
 fi
 export LEROBOT_PYTHON="$PWD/$lrvenv/bin/python" LEROBOT_REQUIRED=1
 log=$(mktemp)
@@ -43,5 +48,6 @@ if [ -f "$report" ]; then
   cat "$report"
   echo
 fi
+df -h "$PWD" | tail -1 | awk '{ print "free disk at the end: " $4 }'
 awk '/^test result:/ { p += $4; f += $6 } END { printf "%d passed, %d failed\n", p, f }' "$log"
 exit "$status"
