@@ -25,6 +25,9 @@ pub const STATE_FORMAT: &str = "libero-mem-rs/train-state/1";
 pub const OPTIM: &str = "optim.bpk";
 /// The memory carried into the next batch (episode sampling).
 pub const CARRY: &str = "carry.json";
+/// The trained weights of a run with a weight average (`[train] ema`), whose `model.bpk` is
+/// the average.
+pub const TRAIN_WEIGHTS: &str = "train_model.bpk";
 
 /// Everything besides weights and optimiser moments that a resumed run needs.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -45,13 +48,20 @@ pub struct TrainState {
     pub elapsed_s: f64,
     /// The model this checkpoint belongs to (variant, sizes, vocabulary).
     pub model: ModelConfig,
+    /// The weight average's decay (`[train] ema`); with one, `model.bpk` is the average and the
+    /// trained weights are [`TRAIN_WEIGHTS`].
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub ema: Option<f64>,
 }
 
 /// Writes a checkpoint of `step` atomically (see [`model::run::save_checkpoint`]), then points
-/// `latest` at it; returns its directory.
+/// `latest` at it; returns its directory. With a weight average `ema`, the average is the
+/// checkpoint's policy (`model.bpk`) and `model` goes beside it as [`TRAIN_WEIGHTS`].
+#[allow(clippy::too_many_arguments)]
 pub fn save(
     run_dir: &Path,
     model: &PolicyModel,
+    ema: Option<&PolicyModel>,
     optim: &ModuleOptimizer,
     state: &TrainState,
     carry: &model::Carry,
@@ -60,9 +70,13 @@ pub fn save(
     Ok(run::save_checkpoint(
         run_dir,
         state.step,
-        model,
+        ema.unwrap_or(model),
         state,
         |t| {
+            if ema.is_some() {
+                model.save(t.join(TRAIN_WEIGHTS))?;
+                run::sync_file(&t.join(TRAIN_WEIGHTS))?;
+            }
             if !carry.is_empty() {
                 let json = serde_json::to_string(&carry.to_record()).expect("carry serialises");
                 run::write_synced(&t.join(CARRY), json.as_bytes())?;
@@ -116,8 +130,10 @@ pub struct Loaded {
     pub dir: PathBuf,
     /// Its state.
     pub state: TrainState,
-    /// The weights.
+    /// The trained weights.
     pub model: PolicyModel,
+    /// The weight average, where the checkpoint has one (without autodiff).
+    pub ema: Option<PolicyModel>,
     /// The optimiser with its moments.
     pub optim: ModuleOptimizer,
 }
@@ -141,8 +157,21 @@ pub fn load(
         path: dir.to_path_buf(),
         message,
     };
-    let model = PolicyModel::load(want, dir.join(run::WEIGHTS), device)
+    let weights = if state.ema.is_some() {
+        TRAIN_WEIGHTS
+    } else {
+        run::WEIGHTS
+    };
+    let model = PolicyModel::load(want, dir.join(weights), device)
         .map_err(|e| incompatible(e.to_string()))?;
+    let ema = match state.ema {
+        Some(_) => Some(
+            PolicyModel::load(want, dir.join(run::WEIGHTS), device)
+                .map_err(|e| incompatible(e.to_string()))?
+                .valid(),
+        ),
+        None => None,
+    };
     let optim = optim
         .load(dir.join(OPTIM))
         .map_err(|e| incompatible(format!("optim.bpk: {e}")))?;
@@ -150,6 +179,7 @@ pub fn load(
         dir: dir.to_path_buf(),
         state,
         model,
+        ema,
         optim,
     })
 }

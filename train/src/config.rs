@@ -265,6 +265,12 @@ pub struct TrainSection {
     /// same count the same bytes.
     #[serde(skip_serializing_if = "is_one")]
     pub replicas: usize,
+    /// Exponential moving average of the weights (none by default): after every optimiser step
+    /// `ema ← decay · ema + (1 − decay) · weights`, from the weights after the first step. The
+    /// average is the policy a checkpoint's `model.bpk` holds (what eval and validation read);
+    /// the trained weights go beside it as `train_model.bpk`, so that a run resumes bit for bit.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub ema: Option<f64>,
     /// Peak learning rate (AdamW).
     pub lr: f64,
     /// Linear warm-up steps (from 0 to `lr`).
@@ -321,6 +327,7 @@ impl Default for TrainSection {
             sampling: Sampling::default(),
             stagger: false,
             replicas: 1,
+            ema: None,
             lr: 3e-4,
             warmup_steps: 500,
             final_lr_fraction: 0.0,
@@ -446,6 +453,11 @@ impl Config {
                 "train.replicas: must be ≥ 1 and divide train.batch_size {} (got {})",
                 t.batch_size, t.replicas
             ));
+        }
+        if let Some(d) = t.ema
+            && !(d > 0.0 && d < 1.0)
+        {
+            return bad("ema", &format!("the decay must be in (0, 1) (got {d})"));
         }
         if !(t.lr > 0.0 && t.lr.is_finite()) {
             return bad("lr", "must be > 0");

@@ -22,6 +22,7 @@ pub mod checkpoint;
 pub mod clip;
 pub mod config;
 pub mod dataset;
+pub mod ema;
 pub mod error;
 pub mod loader;
 pub mod metrics;

@@ -26,6 +26,7 @@ use crate::checkpoint::{self, STATE_FORMAT, TrainState};
 use crate::clip::clip_global_norm;
 use crate::config::{BackendKind, Config, ObsMode, Sampling};
 use crate::dataset::{RunData, ensure_dataset};
+use crate::ema;
 use crate::error::{Result, TrainError};
 use crate::loader::{self, Draw, Prefetcher};
 use crate::metrics::{self, JsonlWriter, Record};
@@ -423,9 +424,20 @@ pub fn train(cfg: &Config, opts: &TrainOptions) -> Result<TrainSummary> {
         return Err(e);
     }
     let episodes = data.train.num_episodes();
-    let (mut model, mut optim, mut state, mut carry, resumed_from) = match loaded {
+    let (mut model, mut ema, mut optim, mut state, mut carry, resumed_from) = match loaded {
         Some(l) => {
             ad.seed(l.state.rng_seed ^ l.state.step);
+            if l.state.ema != t.ema {
+                let says = |d: Option<f64>| d.map_or("none".to_string(), |d| d.to_string());
+                return Err(TrainError::IncompatibleCheckpoint {
+                    path: l.dir,
+                    message: format!(
+                        "it was trained with `train.ema` {}, the config asks {}",
+                        says(l.state.ema),
+                        says(t.ema)
+                    ),
+                });
+            }
             let lanes = l.state.episodes.as_ref().map_or(episodes, |e| e.order.len);
             if lanes != episodes {
                 return Err(TrainError::IncompatibleCheckpoint {
@@ -459,7 +471,7 @@ pub fn train(cfg: &Config, opts: &TrainOptions) -> Result<TrainSummary> {
                     ),
                 });
             }
-            (l.model, l.optim, l.state, carry, Some(l.dir))
+            (l.model, l.ema, l.optim, l.state, carry, Some(l.dir))
         }
         None => {
             ad.seed(t.seed);
@@ -473,8 +485,16 @@ pub fn train(cfg: &Config, opts: &TrainOptions) -> Result<TrainSummary> {
                 rng_seed: t.seed,
                 elapsed_s: 0.0,
                 model: mcfg.clone(),
+                ema: t.ema,
             };
-            (model, new_optimizer(&cfg), state, Carry::default(), None)
+            (
+                model,
+                None,
+                new_optimizer(&cfg),
+                state,
+                Carry::default(),
+                None,
+            )
         }
     };
     let start_step = state.step;
@@ -663,6 +683,12 @@ pub fn train(cfg: &Config, opts: &TrainOptions) -> Result<TrainSummary> {
         })?;
         rec.lr = sched.lr(state.step);
         model = optim.step(rec.lr, model, grads);
+        if let Some(decay) = t.ema {
+            ema = Some(match ema.take() {
+                None => ema::start(&model),
+                Some(e) => ema::update(e, &model, decay).map_err(TrainError::Other)?,
+            });
+        }
         rec.optim_s = optim_started.elapsed().as_secs_f64();
         state.step += 1;
         state.elapsed_s = elapsed_before + started.elapsed().as_secs_f64();
@@ -680,7 +706,7 @@ pub fn train(cfg: &Config, opts: &TrainOptions) -> Result<TrainSummary> {
 
         if val_due(state.step) {
             if let Some(v) = validate(
-                &model,
+                ema.as_ref().unwrap_or(&model),
                 &data,
                 t.batch_size,
                 t.val_batches,
@@ -699,6 +725,7 @@ pub fn train(cfg: &Config, opts: &TrainOptions) -> Result<TrainSummary> {
             last_ckpt = Some(checkpoint::save(
                 &run,
                 &model,
+                ema.as_ref(),
                 &optim,
                 &state,
                 &carry,
@@ -714,7 +741,7 @@ pub fn train(cfg: &Config, opts: &TrainOptions) -> Result<TrainSummary> {
     if final_val
         && state.step > start_step
         && let Some(v) = validate(
-            &model,
+            ema.as_ref().unwrap_or(&model),
             &data,
             t.batch_size,
             t.val_batches,

@@ -292,6 +292,107 @@ fn two_replicas_follow_one_and_resume_bit_for_bit() {
     assert!(err.contains("exp.toml"), "{err}");
 }
 
+/// A weight average (`train.ema`): each checkpoint's policy (`model.bpk`) is the average of the
+/// trained weights after every step (recomputed here from each step's `train_model.bpk`), a
+/// stopped run resumes to the same bytes of both, and a run or config with another decay is
+/// refused with exit status 2.
+#[test]
+fn weight_average_follows_every_step_and_resumes_bit_for_bit() {
+    let _g = serial();
+    let steps = 8;
+    let decay = 0.5;
+    let mut cfg = short_config(steps, 1);
+    cfg.train.ema = Some(decay);
+    let (a, b) = (tempfile::tempdir().unwrap(), tempfile::tempdir().unwrap());
+    train::train(&cfg, &opts(a.path())).unwrap();
+    let name = |k: u64| format!("step_{k:09}");
+    // ema₁ = w₁, emaₖ = d·emaₖ₋₁ + (1 − d)·wₖ, in f64 from the saved trained weights.
+    let mut want: Vec<Vec<f64>> = vec![];
+    for k in 1..=steps {
+        let w = common::weights_of(a.path(), &name(k), "train_model.bpk");
+        if k == 1 {
+            want = w
+                .iter()
+                .map(|t| t.iter().map(|&x| x as f64).collect())
+                .collect();
+        } else {
+            for (e, t) in want.iter_mut().zip(&w) {
+                for (e, &x) in e.iter_mut().zip(t) {
+                    *e = decay * *e + (1.0 - decay) * x as f64;
+                }
+            }
+        }
+        let got = common::weights_of(a.path(), &name(k), "model.bpk");
+        assert_eq!(got.len(), want.len());
+        let mut worst = 0f64;
+        for (g, e) in got.iter().zip(&want) {
+            for (&g, &e) in g.iter().zip(e) {
+                worst = worst.max((g as f64 - e).abs() / e.abs().max(1e-3));
+            }
+        }
+        assert!(worst < 1e-5, "step {k}: the average is off by {worst:e}");
+        if k > 1 {
+            // The average lags: it is not the trained weights.
+            assert_ne!(
+                common::bits(&got),
+                common::bits(&common::weights_of(a.path(), &name(k), "train_model.bpk"))
+            );
+        }
+    }
+    // Stopped half-way and resumed: both files end as the uninterrupted run's.
+    train::train(
+        &cfg,
+        &TrainOptions {
+            stop_at: Some(4),
+            ..opts(b.path())
+        },
+    )
+    .unwrap();
+    let s = train::train(&cfg, &opts(b.path())).unwrap();
+    assert_eq!((s.start_step, s.step), (4, steps));
+    for file in ["model.bpk", "train_model.bpk"] {
+        assert_eq!(
+            common::bits(&common::weights_of(a.path(), &name(steps), file)),
+            common::bits(&common::weights_of(b.path(), &name(steps), file)),
+            "{file}: resumed run differs"
+        );
+    }
+    // Another decay on resume: refused, naming the key.
+    let mut other = cfg.clone();
+    other.train.ema = Some(0.9);
+    other.train.steps = steps + 2;
+    let err = train::train(&other, &opts(b.path())).unwrap_err();
+    assert_eq!(err.exit_code(), 2);
+    assert!(
+        err.to_string()
+            .contains("`train.ema` 0.5, the config asks 0.9"),
+        "{err}"
+    );
+    // Without an average, no second weight file.
+    let c = tempfile::tempdir().unwrap();
+    train::train(&short_config(2, 1), &opts(c.path())).unwrap();
+    assert!(
+        !c.path()
+            .join("checkpoints")
+            .join(name(2))
+            .join("train_model.bpk")
+            .exists()
+    );
+    // A decay outside (0, 1) is a config error.
+    let mut bad = cfg.clone();
+    bad.train.ema = Some(1.0);
+    let path = write_config(c.path(), &bad);
+    let err = exit_2_stderr(&[
+        path.to_str().unwrap(),
+        "--run-dir",
+        c.path().join("r").to_str().unwrap(),
+    ]);
+    assert!(
+        err.contains("train.ema: the decay must be in (0, 1) (got 1)"),
+        "{err}"
+    );
+}
+
 #[test]
 fn kill_9_mid_run_then_resume_matches_uninterrupted_binary_run() {
     let _g = serial();

@@ -56,6 +56,13 @@ pub fn tiny_config(data_dir: &Path) -> train::Config {
 /// order: weights compared by content (the weight files hold random parameter ids besides).
 #[allow(dead_code)] // not every test binary compares weights
 pub fn final_weights(run_dir: &Path) -> Vec<Vec<f32>> {
+    let latest = std::fs::read_to_string(run_dir.join("checkpoints/latest")).unwrap();
+    weights_of(run_dir, latest.trim(), "model.bpk")
+}
+
+/// Every float parameter of weight file `file` in checkpoint `checkpoint` of a run.
+#[allow(dead_code)]
+pub fn weights_of(run_dir: &Path, checkpoint: &str, file: &str) -> Vec<Vec<f32>> {
     use burn::module::{Module, ModuleVisitor, Param};
     use burn::prelude::*;
     struct Collect(Vec<Vec<f32>>);
@@ -68,11 +75,7 @@ pub fn final_weights(run_dir: &Path) -> Vec<Vec<f32>> {
     let cfg: model::ModelConfig =
         serde_json::from_str(&std::fs::read_to_string(run_dir.join("model.json")).unwrap())
             .unwrap();
-    let latest = std::fs::read_to_string(run_dir.join("checkpoints/latest")).unwrap();
-    let path = run_dir
-        .join("checkpoints")
-        .join(latest.trim())
-        .join("model.bpk");
+    let path = run_dir.join("checkpoints").join(checkpoint).join(file);
     let model = model::PolicyModel::load(&cfg, path, &Device::flex()).unwrap();
     let mut c = Collect(vec![]);
     model.visit(&mut c);
