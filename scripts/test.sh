@@ -22,7 +22,7 @@ if ! "$venv/bin/python" -c "import mcap, mcap_protobuf, zstandard, websockets, m
 fi
 export DATA_MCAP_PYTHON="$PWD/$venv/bin/python"
 export EVAL_WS_PYTHON="$PWD/$venv/bin/python" EVAL_WS_REQUIRED=1
-# LeRobot (PyPI `lerobot` 0.4.4, the last for Python 3.11; with torch about 6 GB installed and 4 minutes)
+# LeRobot (PyPI `lerobot` 0.4.4, the last for Python 3.11; with torch 6.4 GB installed, about 2 minutes)
 # opens our LeRobot export with its own LeRobotDataset in sim's lerobot test; the ffmpeg that its
 # imageio-ffmpeg ships decodes the videos for the import half of that test. The pinned list leaves out
 # what nothing here loads (scripts/lerobot-requirements.txt says what); the large wheels go in one at
