@@ -157,20 +157,16 @@ pub fn load(
         path: dir.to_path_buf(),
         message,
     };
-    let weights = if state.ema.is_some() {
-        TRAIN_WEIGHTS
-    } else {
-        run::WEIGHTS
+    let weights = |file: &str| {
+        PolicyModel::load(want, dir.join(file), device).map_err(|e| incompatible(e.to_string()))
     };
-    let model = PolicyModel::load(want, dir.join(weights), device)
-        .map_err(|e| incompatible(e.to_string()))?;
-    let ema = match state.ema {
-        Some(_) => Some(
-            PolicyModel::load(want, dir.join(run::WEIGHTS), device)
-                .map_err(|e| incompatible(e.to_string()))?
-                .valid(),
+    // With a weight average, `model.bpk` is the average and the trained weights lie beside it.
+    let (model, ema) = match state.ema {
+        Some(_) => (
+            weights(TRAIN_WEIGHTS)?,
+            Some(crate::ema::start(&weights(run::WEIGHTS)?)),
         ),
-        None => None,
+        None => (weights(run::WEIGHTS)?, None),
     };
     let optim = optim
         .load(dir.join(OPTIM))
