@@ -162,3 +162,82 @@ fn recorded_episode_gives_equal_tensors_in_training_and_in_eval() {
 fn recorded_episode_gives_equal_state_tokens_and_labels_in_training_and_in_eval() {
     replay(train::config::ObsMode::State);
 }
+
+/// The idle tail reaches the training batch at `data.idle_tail_weight`: the action weights of a
+/// window on a demo recorded with a 30-step hold are 1 on the moves, the weight on the standstill and 0
+/// past the episode's end, as the action loss reads them.
+#[test]
+fn the_idle_tail_reaches_the_batch_at_its_weight() {
+    let tmp = tempfile::tempdir().unwrap();
+    let data_dir = tmp.path().join("data");
+    let task = sim::task::resolve("t1").unwrap();
+    let gen_cfg = sim::generate::GenerateConfig {
+        episodes: 1,
+        val: 0,
+        seed: 5,
+        workers: 1,
+        image_size: 32,
+        // 30 idle steps after the release and the retreat, as `sim generate --hold-steps 30`.
+        expert: sim::generate::expert_config(false, Some(30)),
+        ..Default::default()
+    };
+    let index = sim::generate::generate(&task, &data_dir, &gen_cfg, &|_| {}).unwrap();
+    let episode = data::EpisodeReader::open(data_dir.join(&index.episodes[0].file)).unwrap();
+    let n = episode.len();
+    let actions: Vec<[f32; 7]> = episode
+        .read_raw_steps(0..n)
+        .unwrap()
+        .iter()
+        .map(|s| s.action)
+        .collect();
+    let tail = data::window::idle_tail_start(&actions);
+    assert!(tail + 30 <= n && tail > 0, "tail at {tail} of {n}");
+
+    let mut cfg = e2e::tiny_config(&data_dir, 1);
+    cfg.model.variant = "e_slotssm_oracle".into();
+    cfg.model.obs = train::config::ObsMode::State;
+    cfg.data.augment = false;
+    cfg.data.mask_idle_tail = true;
+    cfg.data.idle_tail_weight = 0.5;
+    let vocab = train::dataset::RunData::model_vocab(&index).unwrap();
+    let opened = data::OpenedDataset::from_index(&data_dir, index).unwrap();
+    let spec = train::dataset::state_spec(&opened, &[], true, false).unwrap();
+    let mcfg = cfg.model_config(vocab).unwrap().with_state(
+        spec.tokens(),
+        spec.num_categories(),
+        spec.features(),
+    );
+    let run_data = train::dataset::RunData::open(&cfg, &mcfg, Some(spec), &opened).unwrap();
+    let device = Device::flex();
+    let (w, ha) = (cfg.window_len(), mcfg.decoder.horizon);
+    // The last frame's chunk of the window ending at step t: one weight per chunk step (the
+    // seven action dims of a step share it).
+    let weights = |t: usize| -> Vec<f32> {
+        let batch = run_data.batch(&run_data.train, &[(t, 0)], &device).unwrap();
+        let m = batch.action_mask.expect("the batcher weighs the actions");
+        let v = m.narrow(1, w - 1, 1).try_to_vec_as::<f32>().unwrap();
+        v.chunks(7)
+            .map(|c| {
+                assert!(c.iter().all(|&x| x == c[0]), "{c:?}");
+                c[0]
+            })
+            .collect()
+    };
+    let expect = |t: usize| -> Vec<f32> {
+        (t..t + ha)
+            .map(|s| {
+                if s < tail {
+                    1.0
+                } else if s < n {
+                    0.5
+                } else {
+                    0.0
+                }
+            })
+            .collect()
+    };
+    for t in [tail - 2, tail - 1, tail, n - 2, n - 1] {
+        assert_eq!(weights(t), expect(t), "window ending at step {t} of {n}");
+    }
+    assert!(weights(tail - 1).contains(&1.0) && weights(tail - 1).contains(&0.5));
+}

@@ -96,6 +96,8 @@ pub fn bench_windows(
             augment: Some(Augment::default()),
             seed: 0,
             mask_idle_tail: false,
+            idle_tail_weight: 0.0,
+            switch_weight: 1.0,
             state_noise: 0.0,
         };
         let ds = WindowDataset::open(dir, Split::Train, cfg)?;

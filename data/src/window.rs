@@ -72,6 +72,15 @@ pub struct WindowConfig {
     /// policy to freeze (OpenVLA drops LIBERO's no-op steps for the same reason). The frames stay
     /// in the windows, so carried memory still sees them.
     pub mask_idle_tail: bool,
+    /// With [`WindowConfig::mask_idle_tail`], the weight of the idle tail's steps in the action
+    /// loss ([`WindowSample::action_weights`]) instead of none: 0 leaves them out, a small weight
+    /// shows a policy the standstill after the task without making it the frames' majority.
+    pub idle_tail_weight: f32,
+    /// Weight factor (≥ 1; 1 = off) of the actions at the gripper's switches: each step whose
+    /// gripper command differs from the step before's, and the steps either side of it
+    /// ([`gripper_switches`]). The decision to close or to open is one step of a demo, where
+    /// every other step's command can be read off the one before.
+    pub switch_weight: f32,
     /// σ in metres of Gaussian noise on every position a state-mode model reads: the robot's
     /// eef position and each object's and articulated part's position, drawn per frame (0 = off;
     /// see [`perturb_positions`]). A regulariser for state-mode training: the action targets stay
@@ -100,6 +109,13 @@ pub fn idle_tail_start(actions: &[[f32; 7]]) -> usize {
     actions.len() - actions.iter().rev().take_while(|a| is_idle(a, g)).count()
 }
 
+/// The steps of `actions` whose gripper command differs from the step before's (never step 0).
+pub fn gripper_switches(actions: &[[f32; 7]]) -> Vec<usize> {
+    (1..actions.len())
+        .filter(|&s| actions[s][6] != actions[s - 1][6])
+        .collect()
+}
+
 impl Default for WindowConfig {
     fn default() -> Self {
         WindowConfig {
@@ -112,6 +128,8 @@ impl Default for WindowConfig {
             augment: None,
             seed: 0,
             mask_idle_tail: false,
+            idle_tail_weight: 0.0,
+            switch_weight: 1.0,
             state_noise: 0.0,
         }
     }
@@ -210,6 +228,12 @@ pub struct WindowSample {
     /// `[T, H_a]`: true where the action is a real step, not a repetition past the end (nor,
     /// with [`WindowConfig::mask_idle_tail`], a step of the episode's idle tail).
     pub action_mask: Vec<bool>,
+    /// `[T, H_a]`: the weight of each action in the action loss: 1 where [`Self::action_mask`]
+    /// holds, [`WindowConfig::idle_tail_weight`] on the idle tail's steps, 0 past the episode's
+    /// end, each times [`WindowConfig::switch_weight`] at a gripper switch (a repeated edge
+    /// frame's weights are those of its step: [`Self::frame_mask`] leaves them out, as it does
+    /// its action mask).
+    pub action_weights: Vec<f32>,
     /// States `[T, 8]`.
     pub states: Vec<f32>,
     /// The instruction.
@@ -232,6 +256,9 @@ pub struct WindowDataset {
     /// Per episode of the split, the first step of its idle tail (read when the dataset opens;
     /// empty unless [`WindowConfig::mask_idle_tail`]).
     tails: Vec<usize>,
+    /// Per episode of the split, its [`gripper_switches`] (empty unless
+    /// [`WindowConfig::switch_weight`] ≠ 1).
+    switches: Vec<Vec<usize>>,
 }
 
 fn mix(mut z: u64) -> u64 {
@@ -347,17 +374,27 @@ impl WindowDataset {
             .enumerate()
             .flat_map(|(k, (_, r))| (0..r.len() as u32).map(move |t| (k as u32, t)))
             .collect();
-        let tails = if cfg.mask_idle_tail {
-            readers
+        let switched = cfg.switch_weight != 1.0;
+        let (tails, switches) = if cfg.mask_idle_tail || switched {
+            let read = readers
                 .par_iter()
-                .map(|(_, r)| -> Result<usize> {
+                .map(|(_, r)| -> Result<(usize, Vec<usize>)> {
                     let steps = r.read_raw_steps(0..r.len())?;
                     let actions: Vec<[f32; 7]> = steps.iter().map(|s| s.action).collect();
-                    Ok(idle_tail_start(&actions))
+                    Ok((idle_tail_start(&actions), gripper_switches(&actions)))
                 })
-                .collect::<Result<Vec<_>>>()?
+                .collect::<Result<Vec<_>>>()?;
+            let (tails, switches): (Vec<_>, Vec<_>) = read.into_iter().unzip();
+            (
+                if cfg.mask_idle_tail {
+                    tails
+                } else {
+                    Vec::new()
+                },
+                if switched { switches } else { Vec::new() },
+            )
         } else {
-            Vec::new()
+            (Vec::new(), Vec::new())
         };
         Ok(WindowDataset {
             readers,
@@ -366,6 +403,7 @@ impl WindowDataset {
             norm,
             epoch: AtomicU64::new(0),
             tails,
+            switches,
         })
     }
 
@@ -519,12 +557,29 @@ impl WindowDataset {
             .collect();
         let mut actions = Vec::with_capacity(tl * c.chunk * 7);
         let mut action_mask = Vec::with_capacity(tl * c.chunk);
+        let mut action_weights = Vec::with_capacity(tl * c.chunk);
         let mut states = Vec::with_capacity(tl * 8);
         for (&f, frame_objects) in frame_steps.iter().zip(&mut objects) {
             for h in 0..c.chunk {
                 let a = (f + h).min(n - 1);
                 actions.extend(self.norm.normalize(&raw[a - lo].action));
                 action_mask.push(f + h < end);
+                let at_switch = self
+                    .switches
+                    .get(k)
+                    .is_some_and(|sw| sw.iter().any(|&s| s.abs_diff(f + h) <= 1));
+                let weight = if f + h < end {
+                    1.0
+                } else if f + h < n {
+                    c.idle_tail_weight
+                } else {
+                    0.0
+                };
+                action_weights.push(if at_switch {
+                    weight * c.switch_weight
+                } else {
+                    weight
+                });
             }
             let mut state = raw[f - lo].state;
             if c.state_noise > 0.0 {
@@ -542,6 +597,7 @@ impl WindowDataset {
             frame_mask,
             actions,
             action_mask,
+            action_weights,
             states,
             instruction: r.meta().instruction.clone(),
             goals: frame_steps

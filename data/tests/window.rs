@@ -410,6 +410,11 @@ fn masked_idle_tail_leaves_the_frames_but_drops_their_actions() {
         m.action_mask,
         vec![true, true, true, false, false, false, false, false]
     );
+    assert_eq!(p.action_weights, vec![1.0; 8]);
+    assert_eq!(
+        m.action_weights,
+        vec![1.0, 1.0, 1.0, 0.0, 0.0, 0.0, 0.0, 0.0]
+    );
     assert_eq!(
         (m.frame_mask, m.actions, m.states),
         (p.frame_mask, p.actions, p.states)
@@ -418,6 +423,126 @@ fn masked_idle_tail_leaves_the_frames_but_drops_their_actions() {
     assert_eq!(
         masked.chunk(1 - ep0, 6, 0).unwrap(),
         plain.chunk(1 - ep0, 6, 0).unwrap()
+    );
+}
+
+#[test]
+fn a_weighted_idle_tail_keeps_its_actions_at_that_weight_and_nothing_past_the_end() {
+    // One episode of 12 steps standing still (gripper closed) from step 7 on.
+    let (dir, _) = dataset_with(&[12], |_, steps| {
+        for s in steps.iter_mut() {
+            s.action[0] = 0.5;
+        }
+        for s in &mut steps[7..] {
+            s.action = [0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0];
+        }
+    });
+    let (_, weighted) = plain_and(dir.path(), |c| WindowConfig {
+        mask_idle_tail: true,
+        idle_tail_weight: 0.25,
+        ..c
+    });
+    let masked = WindowDataset::open(
+        dir.path(),
+        Split::Train,
+        WindowConfig {
+            idle_tail_weight: 0.0,
+            ..weighted.config().clone()
+        },
+    )
+    .unwrap();
+    assert_eq!(weighted.idle_tail(0), Some(7));
+    // Frames 6..10 with actions (f, f+1): step 6 moves, 7..11 stand still.
+    let (m, w) = (
+        masked.chunk(0, 6, 0).unwrap(),
+        weighted.chunk(0, 6, 0).unwrap(),
+    );
+    assert_eq!(w.action_mask, m.action_mask);
+    assert_eq!(
+        w.action_mask,
+        vec![true, false, false, false, false, false, false, false]
+    );
+    assert_eq!(
+        w.action_weights,
+        vec![1.0, 0.25, 0.25, 0.25, 0.25, 0.25, 0.25, 0.25]
+    );
+    assert_eq!(
+        m.action_weights,
+        vec![1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0]
+    );
+    assert_eq!((&w.actions, &w.states), (&m.actions, &m.states));
+    // Frames 10, 11 and two past the end (frame 11 repeated, masked as frames): step 12 and on
+    // weigh nothing, as the action mask leaves them out.
+    let e = weighted.chunk(0, 10, 0).unwrap();
+    assert_eq!(e.frame_mask, vec![true, true, false, false]);
+    assert_eq!(e.frame_steps, vec![10, 11, 11, 11]);
+    assert_eq!(
+        e.action_weights,
+        vec![0.25, 0.25, 0.25, 0.0, 0.25, 0.0, 0.25, 0.0]
+    );
+}
+
+#[test]
+fn gripper_switches_weigh_their_step_and_its_neighbours() {
+    // One episode of 12 steps: the gripper closes at step 4 and opens at step 9.
+    let (dir, _) = dataset_with(&[12], |_, steps| {
+        for (i, s) in steps.iter_mut().enumerate() {
+            s.action[0] = 0.5;
+            s.action[6] = if (4..9).contains(&i) { 1.0 } else { -1.0 };
+        }
+    });
+    let actions: Vec<[f32; 7]> = (0..12)
+        .map(|i| {
+            let g = if (4..9).contains(&i) { 1.0 } else { -1.0 };
+            [0.5, 0.0, 0.0, 0.0, 0.0, 0.0, g]
+        })
+        .collect();
+    assert_eq!(data::window::gripper_switches(&actions), vec![4, 9]);
+    assert!(data::window::gripper_switches(&actions[..4]).is_empty());
+    let (plain, weighted) = plain_and(dir.path(), |c| WindowConfig {
+        switch_weight: 3.0,
+        ..c
+    });
+    // Frames 2..6 with actions (f, f+1): steps 3, 4, 5 are the close's.
+    let (p, w) = (
+        plain.chunk(0, 2, 0).unwrap(),
+        weighted.chunk(0, 2, 0).unwrap(),
+    );
+    assert_eq!(w.frame_steps, vec![2, 3, 4, 5]);
+    assert_eq!(p.action_weights, vec![1.0; 8]);
+    //                         f=2: 2, 3   f=3: 3, 4   f=4: 4, 5   f=5: 5, 6
+    assert_eq!(
+        w.action_weights,
+        vec![1.0, 3.0, 3.0, 3.0, 3.0, 3.0, 3.0, 1.0]
+    );
+    assert_eq!(
+        (&w.actions, &w.action_mask, &w.states),
+        (&p.actions, &p.action_mask, &p.states)
+    );
+    // With the idle tail weighted too, a switch's factor multiplies the tail's weight. The
+    // open at 9 stands still from then on (the tail: steps 9..12 once the arm stops there).
+    let (dir, _) = dataset_with(&[12], |_, steps| {
+        for (i, s) in steps.iter_mut().enumerate() {
+            s.action[0] = 0.5;
+            s.action[6] = if (4..9).contains(&i) { 1.0 } else { -1.0 };
+            if i >= 9 {
+                s.action = [0.0, 0.0, 0.0, 0.0, 0.0, 0.0, -1.0];
+            }
+        }
+    });
+    let (_, both) = plain_and(dir.path(), |c| WindowConfig {
+        mask_idle_tail: true,
+        idle_tail_weight: 0.5,
+        switch_weight: 3.0,
+        ..c
+    });
+    assert_eq!(both.idle_tail(0), Some(9));
+    let b = both.chunk(0, 7, 0).unwrap();
+    assert_eq!(b.frame_steps, vec![7, 8, 9, 10]);
+    //                         f=7: 7, 8   f=8: 8, 9   f=9: 9, 10  f=10: 10, 11
+    assert_eq!(
+        b.action_weights,
+        vec![1.0, 3.0, 3.0, 1.5, 1.5, 1.5, 1.5, 0.5]
     );
 }
 

@@ -81,10 +81,27 @@ pub struct DataConfig {
     /// e.g. the hold of `generate.hold_steps`): frames that teach a policy to freeze.
     #[serde(default, skip_serializing_if = "std::ops::Not::not")]
     pub mask_idle_tail: bool,
+    /// With `mask_idle_tail`, the idle tail's weight in the action loss instead of none (in
+    /// [0, 1]; 0 = left out). Validation leaves the tail out whatever this says.
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub idle_tail_weight: f64,
+    /// The action loss's weight factor at the gripper's switches (each step whose gripper
+    /// command differs from the step before's, and its two neighbours), in [1, 100]; 1 = off.
+    /// Validation weighs every step alike.
+    #[serde(default = "unit", skip_serializing_if = "is_unit")]
+    pub gripper_switch_weight: f64,
     /// σ in metres of Gaussian noise on the positions a state-mode model reads (eef, objects,
     /// parts), drawn per training frame; validation windows stay clean (0 = off).
     #[serde(default, skip_serializing_if = "is_zero")]
     pub state_noise: f64,
+}
+
+fn unit() -> f64 {
+    1.0
+}
+
+fn is_unit(v: &f64) -> bool {
+    *v == 1.0
 }
 
 fn yes() -> bool {
@@ -422,6 +439,25 @@ impl Config {
         }
         if !self.model.state_fingers && self.model.obs != ObsMode::State {
             return Err("model.state_fingers: only state mode (`obs = \"state\"`) reads it".into());
+        }
+        let w = self.data.idle_tail_weight;
+        if !(w.is_finite() && (0.0..=1.0).contains(&w)) {
+            return Err(format!(
+                "data.idle_tail_weight: must be a weight in [0, 1] (got {w})"
+            ));
+        }
+        if w > 0.0 && !self.data.mask_idle_tail {
+            return Err(
+                "data.idle_tail_weight: weights the idle tail that `data.mask_idle_tail = true` \
+                 sets apart; set that too"
+                    .into(),
+            );
+        }
+        let g = self.data.gripper_switch_weight;
+        if !(g.is_finite() && (1.0..=100.0).contains(&g)) {
+            return Err(format!(
+                "data.gripper_switch_weight: must be a factor in [1, 100] (got {g})"
+            ));
         }
         let sigma = self.data.state_noise;
         if !(sigma.is_finite() && (0.0..=0.1).contains(&sigma)) {
@@ -851,6 +887,52 @@ variant = "e_slotssm"
             assert!(
                 e.to_string()
                     .contains("data.state_noise: must be a number of metres in [0, 0.1]"),
+                "{bad}: {e}"
+            );
+        }
+        let c = Config::load_with(
+            &p,
+            &sets(&["data.mask_idle_tail=true", "data.idle_tail_weight=0.1"]),
+        )
+        .unwrap();
+        assert_eq!(c.data.idle_tail_weight, 0.1);
+        assert!(c.to_toml().contains("idle_tail_weight = 0.1"));
+        let c = Config::load_with(&p, &sets(&["data.mask_idle_tail=true"])).unwrap();
+        assert!(!c.to_toml().contains("idle_tail_weight"));
+        let e = Config::load_with(&p, &sets(&["data.idle_tail_weight=0.1"])).unwrap_err();
+        assert!(
+            e.to_string().contains("data.idle_tail_weight")
+                && e.to_string().contains("`data.mask_idle_tail = true`")
+                && e.to_string().contains(&p.display().to_string()),
+            "{e}"
+        );
+        for bad in ["-0.1", "1.5", "nan"] {
+            let e = Config::load_with(
+                &p,
+                &sets(&[
+                    "data.mask_idle_tail=true",
+                    &format!("data.idle_tail_weight={bad}"),
+                ]),
+            )
+            .unwrap_err();
+            assert!(
+                e.to_string()
+                    .contains("data.idle_tail_weight: must be a weight in [0, 1]"),
+                "{bad}: {e}"
+            );
+        }
+        let c = Config::load_with(&p, &sets(&["data.gripper_switch_weight=4"])).unwrap();
+        assert_eq!(c.data.gripper_switch_weight, 4.0);
+        assert!(c.to_toml().contains("gripper_switch_weight = 4.0"));
+        let c = Config::load_with(&p, &sets(&[])).unwrap();
+        assert_eq!(c.data.gripper_switch_weight, 1.0);
+        assert!(!c.to_toml().contains("gripper_switch_weight"));
+        for bad in ["0.5", "101", "nan"] {
+            let e = Config::load_with(&p, &sets(&[&format!("data.gripper_switch_weight={bad}")]))
+                .unwrap_err();
+            assert!(
+                e.to_string()
+                    .contains("data.gripper_switch_weight: must be a factor in [1, 100]"),
                 "{bad}: {e}"
             );
         }

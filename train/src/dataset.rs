@@ -167,6 +167,8 @@ impl RunData {
             augment: cfg.data.augment.then(data::Augment::default),
             seed: cfg.train.seed,
             mask_idle_tail: cfg.data.mask_idle_tail,
+            idle_tail_weight: cfg.data.idle_tail_weight as f32,
+            switch_weight: cfg.data.gripper_switch_weight as f32,
             state_noise: cfg.data.state_noise as f32,
         };
         let train = WindowDataset::from_opened(data, Split::Train, win.clone())?;
@@ -178,6 +180,8 @@ impl RunData {
         }
         let val_win = WindowConfig {
             augment: None,
+            idle_tail_weight: 0.0,
+            switch_weight: 1.0,
             state_noise: 0.0,
             ..win
         };

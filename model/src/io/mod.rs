@@ -401,7 +401,7 @@ impl Processor {
     ///
     /// # Shapes
     /// - output: images `[B, T, 3, H, W]`, actions `[B, T, H_a, 7]`, frame mask `[B, T]`,
-    ///   action mask `[B, T, H_a, 7]`, instruction `[B, L_txt]`, subgoal `[B, T, G, L_sg]`
+    ///   action weights `[B, T, H_a, 7]`, instruction `[B, L_txt]`, subgoal `[B, T, G, L_sg]`
     ///   (as in [`Processor::step`]; with boxes `[B, T, J, 4]`, J the most objects of a frame)
     pub fn batch(&self, samples: &[WindowSample], device: &Device) -> Result<WindowBatch> {
         let first = samples
@@ -418,6 +418,7 @@ impl Processor {
                 || s.states.len() != t * 8
                 || s.actions.len() != t * ha * 7
                 || s.action_mask.len() != t * ha
+                || s.action_weights.len() != t * ha
             {
                 return Err(ModelError::Input(format!(
                     "window of episode {} at step {}: {} frames, {} image values, {} actions; \
@@ -442,8 +443,12 @@ impl Processor {
         for s in samples {
             for j in 0..t {
                 for k in 0..ha {
-                    let on = s.frame_mask[j] && s.action_mask[j * ha + k];
-                    action_mask.extend([f32::from(u8::from(on)); 7]);
+                    let w = if s.frame_mask[j] {
+                        s.action_weights[j * ha + k]
+                    } else {
+                        0.0
+                    };
+                    action_mask.extend([w; 7]);
                 }
             }
         }
