@@ -95,10 +95,7 @@ pub fn bench_windows(
             images: true,
             augment: Some(Augment::default()),
             seed: 0,
-            mask_idle_tail: false,
-            idle_tail_weight: 0.0,
-            switch_weight: 1.0,
-            state_noise: 0.0,
+            ..WindowConfig::default()
         };
         let ds = WindowDataset::open(dir, Split::Train, cfg)?;
         let mut rng = ChaCha8Rng::seed_from_u64(1);

@@ -374,28 +374,27 @@ impl WindowDataset {
             .enumerate()
             .flat_map(|(k, (_, r))| (0..r.len() as u32).map(move |t| (k as u32, t)))
             .collect();
+        // One read of every episode's actions when either needs them.
         let switched = cfg.switch_weight != 1.0;
-        let (tails, switches) = if cfg.mask_idle_tail || switched {
-            let read = readers
+        let read = if cfg.mask_idle_tail || switched {
+            readers
                 .par_iter()
                 .map(|(_, r)| -> Result<(usize, Vec<usize>)> {
                     let steps = r.read_raw_steps(0..r.len())?;
                     let actions: Vec<[f32; 7]> = steps.iter().map(|s| s.action).collect();
                     Ok((idle_tail_start(&actions), gripper_switches(&actions)))
                 })
-                .collect::<Result<Vec<_>>>()?;
-            let (tails, switches): (Vec<_>, Vec<_>) = read.into_iter().unzip();
-            (
-                if cfg.mask_idle_tail {
-                    tails
-                } else {
-                    Vec::new()
-                },
-                if switched { switches } else { Vec::new() },
-            )
+                .collect::<Result<Vec<_>>>()?
         } else {
-            (Vec::new(), Vec::new())
+            Vec::new()
         };
+        let (mut tails, mut switches): (Vec<_>, Vec<_>) = read.into_iter().unzip();
+        if !cfg.mask_idle_tail {
+            tails.clear();
+        }
+        if !switched {
+            switches.clear();
+        }
         Ok(WindowDataset {
             readers,
             samples,
@@ -564,10 +563,6 @@ impl WindowDataset {
                 let a = (f + h).min(n - 1);
                 actions.extend(self.norm.normalize(&raw[a - lo].action));
                 action_mask.push(f + h < end);
-                let at_switch = self
-                    .switches
-                    .get(k)
-                    .is_some_and(|sw| sw.iter().any(|&s| s.abs_diff(f + h) <= 1));
                 let weight = if f + h < end {
                     1.0
                 } else if f + h < n {
@@ -575,11 +570,11 @@ impl WindowDataset {
                 } else {
                     0.0
                 };
-                action_weights.push(if at_switch {
-                    weight * c.switch_weight
-                } else {
-                    weight
-                });
+                let at_switch = self
+                    .switches
+                    .get(k)
+                    .is_some_and(|sw| sw.iter().any(|&s| s.abs_diff(f + h) <= 1));
+                action_weights.push(weight * if at_switch { c.switch_weight } else { 1.0 });
             }
             let mut state = raw[f - lo].state;
             if c.state_noise > 0.0 {

@@ -27,8 +27,9 @@ pub struct WindowBatch {
     pub actions: Tensor<4>,
     /// 1 for valid frames, 0 for padding `[B, T]`.
     pub frame_mask: Tensor<2>,
-    /// The weight of each action entry in L_act `[B, T, H_a, A]`: 1 or 0, or a window's
-    /// idle-tail weight (None: 1 for every entry of a valid frame).
+    /// The weight of each action entry in L_act `[B, T, H_a, A]`: its window's
+    /// `action_weights` (1, 0, the idle tail's weight, × the gripper-switch factor); None: 1 for
+    /// every entry of a valid frame.
     pub action_mask: Option<Tensor<4>>,
     /// Instruction token ids `[B, L_txt]` (see [`crate::io::Tokenizer`]).
     pub instruction: Tensor<2, Int>,
