@@ -195,6 +195,10 @@ pub struct ModelSection {
     /// scale (none by default; see `model::io::state`).
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub state_relative_cm: Vec<f32>,
+    /// State mode: scales in cm of the squashed offset from each object token to its nearest
+    /// other object, tanh(Δ / s) per axis and scale (none by default; see `model::io::state`).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub state_neighbour_cm: Vec<f32>,
     /// State mode: whether the robot token carries the finger joint positions (default true;
     /// false leaves the gripper command to be read from the scene, not copied from the fingers).
     #[serde(default = "yes", skip_serializing_if = "is_yes")]
@@ -474,6 +478,17 @@ impl Config {
         if let Some(s) = model::io::state::bad_relative_scale(rel) {
             return Err(format!(
                 "model.state_relative_cm: scales are finite numbers of cm > 0 (got {s})"
+            ));
+        }
+        let near = &self.model.state_neighbour_cm;
+        if !near.is_empty() && self.model.obs != ObsMode::State {
+            return Err(
+                "model.state_neighbour_cm: only state mode (`obs = \"state\"`) reads it".into(),
+            );
+        }
+        if let Some(s) = model::io::state::bad_relative_scale(near) {
+            return Err(format!(
+                "model.state_neighbour_cm: scales are finite numbers of cm > 0 (got {s})"
             ));
         }
         let t = &self.train;
@@ -843,6 +858,13 @@ variant = "e_slotssm"
         )
         .unwrap();
         assert_eq!(c.model.state_relative_cm, [2.0, 8.5]);
+        let c = Config::load_with(
+            &p,
+            &sets(&["model.obs=state", "model.state_neighbour_cm=[3, 10]"]),
+        )
+        .unwrap();
+        assert_eq!(c.model.state_neighbour_cm, [3.0, 10.0]);
+        assert!(c.to_toml().contains("state_neighbour_cm"));
         let c = Config::load_with(&p, &sets(&["model.obs=state", "model.state_fingers=false"]))
             .unwrap();
         assert!(!c.model.state_fingers);
@@ -946,6 +968,22 @@ variant = "e_slotssm"
         assert!(
             e.to_string()
                 .contains("model.state_relative_cm: scales are finite numbers of cm > 0 (got 0)"),
+            "{e}"
+        );
+        let e = Config::load_with(&p, &sets(&["model.state_neighbour_cm=[3]"])).unwrap_err();
+        assert!(
+            e.to_string()
+                .contains("model.state_neighbour_cm: only state mode"),
+            "{e}"
+        );
+        let e = Config::load_with(
+            &p,
+            &sets(&["model.obs=state", "model.state_neighbour_cm=[3, -1]"]),
+        )
+        .unwrap_err();
+        assert!(
+            e.to_string()
+                .contains("model.state_neighbour_cm: scales are finite numbers of cm > 0 (got -1)"),
             "{e}"
         );
         let e = Config::load_with(&p, &sets(&["train.stepz=7"])).unwrap_err();

@@ -423,15 +423,18 @@ impl EpisodeSampler {
 /// poses (episode schema 2); the first that was not is named in the error. `relative_cm`: the
 /// scales of the squashed object − gripper features (`[model].state_relative_cm`); `fingers`:
 /// whether the robot token carries the finger joints (`[model].state_fingers`); `parts`: whether
-/// articulated parts are tokens (`[model].state_parts`; an error when no episode records any).
+/// articulated parts are tokens (`[model].state_parts`; an error when no episode records any);
+/// `neighbour_cm`: the scales of the offsets to each token's nearest other object
+/// (`[model].state_neighbour_cm`).
 pub fn state_spec(
     data: &OpenedDataset,
     relative_cm: &[f32],
+    neighbour_cm: &[f32],
     fingers: bool,
     parts: bool,
 ) -> Result<StateSpec> {
     let new_stats = || {
-        let s = StateStats::new(relative_cm);
+        let s = StateStats::new(relative_cm).with_neighbours(neighbour_cm);
         let s = if fingers { s } else { s.without_fingers() };
         if parts { s.with_parts() } else { s }
     };

@@ -264,6 +264,7 @@ pub fn open_data(cfg: &Config) -> Result<(ModelConfig, RunData)> {
             let spec = crate::dataset::state_spec(
                 &opened,
                 &cfg.model.state_relative_cm,
+                &cfg.model.state_neighbour_cm,
                 cfg.model.state_fingers,
                 cfg.model.state_parts,
             )?;

@@ -20,7 +20,12 @@
 //!   tanh((object position − gripper position) / s_j) per axis for objects, zeros for the robot
 //!   and padding. Linear in centimetres near the gripper and saturating beyond a few s_j, they
 //!   give the last centimetres of a reach the resolution that decimetres standardised over the
-//!   whole table do not (measured on T9, see `configs/state/t9.toml`).
+//!   whole table do not (measured on T9, see `configs/state/t9.toml`);
+//! - then, when the spec asks for neighbour scales n_1…n_m (cm), 3·m more numbers per token:
+//!   tanh((nearest other object's position − this token's position) / n_j) per axis (nearest in
+//!   3-D among the other objects, not their parts; all ones when there is none), zeros for the
+//!   robot and padding. Whether a plate holds a bowl, or a basket the cheese, is then a
+//!   property of the token itself instead of a comparison between tokens (T7's empty plate).
 //!
 //! The numbers are then standardised with the training data's mean and standard deviation per
 //! feature, one set for object tokens and one for the robot token ([`StateStats`]): raw, the
@@ -66,6 +71,10 @@ pub struct StateSpec {
     /// Scales (cm) of the squashed object − gripper features (none: [`FEATURES`] per token).
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub relative_cm: Vec<f32>,
+    /// Scales (cm) of the squashed offsets to each token's nearest other object (none: no such
+    /// features).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub neighbour_cm: Vec<f32>,
     /// Whether the robot token carries the finger joint positions (false: zeros there). The
     /// fingers tell the gripper command of every frame but the one that starts a close, so a
     /// policy can learn to copy them and then never starts a close on its own.
@@ -96,6 +105,7 @@ pub struct StateStats {
     names: Vec<String>,
     max_objects: usize,
     relative_cm: Vec<f32>,
+    neighbour_cm: Vec<f32>,
     fingers: bool,
     parts: bool,
     /// Count, sum and sum of squares per feature.
@@ -109,9 +119,10 @@ impl Default for StateStats {
     }
 }
 
-/// Numbers per token with the squashed relative features at `relative_cm`.
-fn features_with(relative_cm: &[f32]) -> usize {
-    FEATURES + 3 * relative_cm.len()
+/// Numbers per token with the squashed relative features at `relative_cm` and the neighbour
+/// features at `neighbour_cm`.
+fn features_with(relative_cm: &[f32], neighbour_cm: &[f32]) -> usize {
+    FEATURES + 3 * relative_cm.len() + 3 * neighbour_cm.len()
 }
 
 /// The first of `relative_cm` that is not a usable scale (finite and > 0 cm), if any.
@@ -129,11 +140,12 @@ impl StateStats {
     /// Statistics of tokens with the squashed relative features at `relative_cm` (none: the
     /// [`FEATURES`] base numbers only, as [`Default`]).
     pub fn new(relative_cm: &[f32]) -> Self {
-        let zeros = || std::array::from_fn(|_| vec![0.0; features_with(relative_cm)]);
+        let zeros = || std::array::from_fn(|_| vec![0.0; features_with(relative_cm, &[])]);
         StateStats {
             names: Vec::new(),
             max_objects: 0,
             relative_cm: relative_cm.to_vec(),
+            neighbour_cm: Vec::new(),
             fingers: true,
             parts: false,
             objects: zeros(),
@@ -145,6 +157,19 @@ impl StateStats {
     /// ([`StateSpec::fingers`] false).
     pub fn without_fingers(mut self) -> Self {
         self.fingers = false;
+        self
+    }
+
+    /// The same statistics for tokens with the squashed offsets to the nearest other object at
+    /// `neighbour_cm` ([`StateSpec::neighbour_cm`]); call before adding frames.
+    pub fn with_neighbours(mut self, neighbour_cm: &[f32]) -> Self {
+        self.neighbour_cm = neighbour_cm.to_vec();
+        let nf = features_with(&self.relative_cm, neighbour_cm);
+        for acc in [&mut self.objects, &mut self.robot] {
+            for v in acc.iter_mut() {
+                v.resize(nf, 0.0);
+            }
+        }
         self
     }
 
@@ -167,6 +192,7 @@ impl StateStats {
         let order: Vec<usize> = (0..sources.len()).collect();
         let spec = StateSpec {
             relative_cm: self.relative_cm.clone(),
+            neighbour_cm: self.neighbour_cm.clone(),
             fingers: self.fingers,
             parts: self.parts,
             ..StateSpec::from_names(sources.iter().map(|s| s.name.as_ref()), sources.len())
@@ -197,6 +223,10 @@ impl StateStats {
         assert_eq!(
             self.relative_cm, other.relative_cm,
             "statistics of tokens with different relative scales"
+        );
+        assert_eq!(
+            self.neighbour_cm, other.neighbour_cm,
+            "statistics of tokens with different neighbour scales"
         );
         assert_eq!(
             self.fingers, other.fingers,
@@ -239,6 +269,7 @@ impl StateStats {
         };
         StateSpec {
             relative_cm: self.relative_cm.clone(),
+            neighbour_cm: self.neighbour_cm.clone(),
             fingers: self.fingers,
             parts: self.parts,
             object_norm: norm(&self.objects),
@@ -259,6 +290,7 @@ impl StateSpec {
             categories,
             max_objects,
             relative_cm: Vec::new(),
+            neighbour_cm: Vec::new(),
             fingers: true,
             parts: false,
             object_norm: [vec![0.0; FEATURES], vec![1.0; FEATURES]],
@@ -266,9 +298,9 @@ impl StateSpec {
         }
     }
 
-    /// Numbers per token F: [`FEATURES`], then 3 per relative scale.
+    /// Numbers per token F: [`FEATURES`], then 3 per relative scale, then 3 per neighbour scale.
     pub fn features(&self) -> usize {
-        features_with(&self.relative_cm)
+        features_with(&self.relative_cm, &self.neighbour_cm)
     }
 
     /// Checks that the standardisation has one mean and deviation per feature and that the
@@ -278,6 +310,11 @@ impl StateSpec {
         if let Some(s) = bad_relative_scale(&self.relative_cm) {
             return Err(ModelError::Config(format!(
                 "state relative scale {s} cm: scales are finite and > 0"
+            )));
+        }
+        if let Some(s) = bad_relative_scale(&self.neighbour_cm) {
+            return Err(ModelError::Config(format!(
+                "state neighbour scale {s} cm: scales are finite and > 0"
             )));
         }
         for (what, norm) in [
@@ -462,6 +499,26 @@ fn sources(parts: bool, objects: &[ObjectAnnotation]) -> Vec<Source<'_>> {
     out
 }
 
+/// The position of the object nearest (3-D) to `at` among `objects` other than `own` (compared
+/// by address: a token's own object and, for a part, the object it belongs to), if any has a
+/// pose.
+fn nearest_other(
+    objects: &[ObjectAnnotation],
+    own: &ObjectAnnotation,
+    at: [f32; 3],
+) -> Option<[f32; 3]> {
+    objects
+        .iter()
+        .filter(|o| !std::ptr::eq(*o, own))
+        .filter_map(|o| o.pose.map(|p| [p[0], p[1], p[2]]))
+        .map(|p| {
+            let d2: f32 = (0..3).map(|d| (p[d] - at[d]) * (p[d] - at[d])).sum();
+            (d2, p)
+        })
+        .min_by(|a, b| a.0.total_cmp(&b.0))
+        .map(|(_, p)| p)
+}
+
 /// [`tokens`] before standardisation.
 fn raw_tokens(
     spec: &StateSpec,
@@ -512,6 +569,15 @@ fn raw_tokens(
         f[6..12].copy_from_slice(&rotation_columns(quat_matrix([
             pose[3], pose[4], pose[5], pose[6],
         ])));
+        if !spec.neighbour_cm.is_empty() {
+            let at = FEATURES + 3 * spec.relative_cm.len();
+            let near = nearest_other(objects, o, [pose[0], pose[1], pose[2]]);
+            for (j, s) in spec.neighbour_cm.iter().enumerate() {
+                for d in 0..3 {
+                    f[at + 3 * j + d] = near.map_or(1.0, |p| ((p[d] - pose[d]) * 100.0 / s).tanh());
+                }
+            }
+        }
         f[12] = f32::from(u8::from(o.grasped.unwrap_or(false)));
         f[13] = s.joint;
         categories[k] = spec.category_id(&s.name);
@@ -704,6 +770,56 @@ mod tests {
         };
         let e = bad.validate().unwrap_err().to_string();
         assert!(e.contains("expected 18 means"), "{e}");
+    }
+
+    #[test]
+    fn neighbour_scales_give_the_offset_to_the_nearest_other_object() {
+        let state = [0.0, 0.0, 1.2, 0.0, 0.0, 0.0, 0.0, 0.0];
+        // A plate holding a bowl 3 cm above it, and an empty plate 30 cm away.
+        let mut bowl = obj("bowl_1", 0.0, "0");
+        bowl.pose = Some([0.0, 0.1, 0.93, 1.0, 0.0, 0.0, 0.0]);
+        let full = obj("plate_1", 0.0, "0");
+        let empty = obj("plate_2", -0.3, "0");
+        let objects = [full, bowl, empty];
+        let stats = StateStats::new(&[2.0]).with_neighbours(&[3.0, 10.0]);
+        let mut stats = stats;
+        stats.add(&objects, &state).unwrap();
+        let spec = stats.finish();
+        assert_eq!(spec.neighbour_cm, [3.0, 10.0]);
+        assert_eq!(spec.features(), FEATURES + 3 + 6);
+        assert_eq!(spec.object_norm[0].len(), FEATURES + 9);
+        spec.validate().unwrap();
+        let nf = spec.features();
+        let raw = StateSpec {
+            object_norm: [vec![0.0; nf], vec![1.0; nf]],
+            robot_norm: [vec![0.0; nf], vec![1.0; nf]],
+            ..spec.clone()
+        };
+        let t = tokens(&raw, &objects, &state, "0", &[0, 1, 2]).unwrap();
+        let at = FEATURES + 3;
+        let f = |k: usize| &t.features[k * nf + at..(k + 1) * nf];
+        // The full plate's nearest object is its bowl: (0, 0, +3 cm).
+        let t3 = 1.0f32.tanh();
+        assert!(f(0)[0].abs() < 1e-5 && f(0)[1].abs() < 1e-5, "{:?}", f(0));
+        assert!((f(0)[2] - t3).abs() < 1e-4 && (f(0)[5] - 0.3f32.tanh()).abs() < 1e-4);
+        // The bowl's is the plate below it: (0, 0, −3 cm).
+        assert!((f(1)[2] + t3).abs() < 1e-4, "{:?}", f(1));
+        // The empty plate's is the full plate 30 cm away in x: saturated at 3 cm.
+        assert!((f(2)[0] - 10.0f32.tanh()).abs() < 1e-5 && (f(2)[3] - 3.0f32.tanh()).abs() < 1e-5);
+        // The robot token carries zeros there; the features follow the scene, not the order.
+        assert!(t.features[3 * nf + at..4 * nf].iter().all(|&v| v == 0.0));
+        let u = tokens(&raw, &objects, &state, "0", &[2, 0, 1]).unwrap();
+        assert_eq!(&u.features[at..nf], f(2));
+        // A lone object has no neighbour: all ones.
+        let lone = tokens(&raw, &objects[..1], &state, "0", &[0]).unwrap();
+        assert!(lone.features[at..nf].iter().all(|&v| v == 1.0));
+        // A scale that is not a number of cm > 0 is refused.
+        let bad = StateSpec {
+            neighbour_cm: vec![0.0, 10.0],
+            ..spec
+        };
+        let e = bad.validate().unwrap_err().to_string();
+        assert!(e.contains("state neighbour scale 0 cm"), "{e}");
     }
 
     #[test]
