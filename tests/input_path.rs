@@ -44,8 +44,8 @@ fn replay(obs: train::config::ObsMode) {
     cfg.model.variant = "e_slotssm_oracle".into();
     cfg.model.obs = obs;
     if obs == train::config::ObsMode::State {
-        // With the squashed relative and neighbour features and the cabinet's drawer handles as tokens of
-        // their own, so both sides compute those too.
+        // With the squashed relative and neighbour features and the cabinet's drawer handles as
+        // tokens of their own, so both sides compute those too.
         cfg.model.state_relative_cm = vec![2.0, 8.0];
         cfg.model.state_neighbour_cm = vec![3.0];
         cfg.model.state_parts = true;

@@ -435,11 +435,17 @@ impl Config {
     /// Value checks that serde cannot express (the message names the key).
     fn check(&self) -> std::result::Result<(), String> {
         Variant::from_name(&self.model.variant).map_err(|e| format!("model.variant: {e}"))?;
-        let rel = &self.model.state_relative_cm;
-        if !rel.is_empty() && self.model.obs != ObsMode::State {
-            return Err(
-                "model.state_relative_cm: only state mode (`obs = \"state\"`) reads it".into(),
-            );
+        // The state-mode scales in cm: each only read in state mode, each a list of cm > 0.
+        let scales = [
+            ("model.state_relative_cm", &self.model.state_relative_cm),
+            ("model.state_neighbour_cm", &self.model.state_neighbour_cm),
+        ];
+        for (key, cm) in scales {
+            if !cm.is_empty() && self.model.obs != ObsMode::State {
+                return Err(format!(
+                    "{key}: only state mode (`obs = \"state\"`) reads it"
+                ));
+            }
         }
         if !self.model.state_fingers && self.model.obs != ObsMode::State {
             return Err("model.state_fingers: only state mode (`obs = \"state\"`) reads it".into());
@@ -475,21 +481,12 @@ impl Config {
         if self.model.state_parts && self.model.obs != ObsMode::State {
             return Err("model.state_parts: only state mode (`obs = \"state\"`) reads it".into());
         }
-        if let Some(s) = model::io::state::bad_relative_scale(rel) {
-            return Err(format!(
-                "model.state_relative_cm: scales are finite numbers of cm > 0 (got {s})"
-            ));
-        }
-        let near = &self.model.state_neighbour_cm;
-        if !near.is_empty() && self.model.obs != ObsMode::State {
-            return Err(
-                "model.state_neighbour_cm: only state mode (`obs = \"state\"`) reads it".into(),
-            );
-        }
-        if let Some(s) = model::io::state::bad_relative_scale(near) {
-            return Err(format!(
-                "model.state_neighbour_cm: scales are finite numbers of cm > 0 (got {s})"
-            ));
+        for (key, cm) in scales {
+            if let Some(s) = model::io::state::bad_relative_scale(cm) {
+                return Err(format!(
+                    "{key}: scales are finite numbers of cm > 0 (got {s})"
+                ));
+            }
         }
         let t = &self.train;
         let bad = |k: &str, why: &str| Err(format!("train.{k}: {why}"));

@@ -307,15 +307,15 @@ impl StateSpec {
     /// relative scales are positive (a hand-edited or corrupt `processor.json`).
     pub fn validate(&self) -> Result<()> {
         let nf = self.features();
-        if let Some(s) = bad_relative_scale(&self.relative_cm) {
-            return Err(ModelError::Config(format!(
-                "state relative scale {s} cm: scales are finite and > 0"
-            )));
-        }
-        if let Some(s) = bad_relative_scale(&self.neighbour_cm) {
-            return Err(ModelError::Config(format!(
-                "state neighbour scale {s} cm: scales are finite and > 0"
-            )));
+        for (what, cm) in [
+            ("relative", &self.relative_cm),
+            ("neighbour", &self.neighbour_cm),
+        ] {
+            if let Some(s) = bad_relative_scale(cm) {
+                return Err(ModelError::Config(format!(
+                    "state {what} scale {s} cm: scales are finite and > 0"
+                )));
+            }
         }
         for (what, norm) in [
             ("object_norm", &self.object_norm),
@@ -781,8 +781,7 @@ mod tests {
         let full = obj("plate_1", 0.0, "0");
         let empty = obj("plate_2", -0.3, "0");
         let objects = [full, bowl, empty];
-        let stats = StateStats::new(&[2.0]).with_neighbours(&[3.0, 10.0]);
-        let mut stats = stats;
+        let mut stats = StateStats::new(&[2.0]).with_neighbours(&[3.0, 10.0]);
         stats.add(&objects, &state).unwrap();
         let spec = stats.finish();
         assert_eq!(spec.neighbour_cm, [3.0, 10.0]);
