@@ -91,3 +91,34 @@ fn every_experiment_run_loads_as_train_will_see_it() {
     }
     assert!(planned >= 50, "only {planned} planned runs");
 }
+
+/// The probe scenes under `configs/probes/` (README, "Carries to a target that varies are learnt
+/// late") load as tasks from their paths, with the subgoal counts their headers describe.
+#[test]
+fn probe_scenes_load_as_tasks() {
+    let dir = e2e::repo_root().join("configs/probes");
+    let want = [
+        ("bowl_fixed_plate_wide.bddl", 1),
+        ("bowl_to_plate_wide.bddl", 1),
+        ("t7_first_move.bddl", 1),
+        ("t7_two_moves.bddl", 2),
+    ];
+    let mut found: Vec<String> = std::fs::read_dir(&dir)
+        .unwrap_or_else(|e| panic!("{}: {e}", dir.display()))
+        .map(|e| {
+            e.expect("directory entry")
+                .file_name()
+                .to_string_lossy()
+                .into_owned()
+        })
+        .collect();
+    found.sort();
+    assert_eq!(found, want.map(|(f, _)| f.to_string()));
+    for (file, goal_len) in want {
+        let path = dir.join(file);
+        let task = sim::task::resolve(&path.to_string_lossy())
+            .unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+        assert_eq!(task.goal_len, goal_len, "{file}");
+        assert!(task.max_steps > 0, "{file}");
+    }
+}
