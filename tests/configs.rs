@@ -6,15 +6,22 @@
 
 use std::path::{Path, PathBuf};
 
-/// The `*.toml` files directly in `dir`, sorted.
-fn tomls(dir: &Path) -> Vec<PathBuf> {
+/// Every entry directly in `dir`, sorted.
+fn entries(dir: &Path) -> Vec<PathBuf> {
     let mut out: Vec<PathBuf> = std::fs::read_dir(dir)
         .unwrap_or_else(|e| panic!("{}: {e}", dir.display()))
         .map(|e| e.expect("directory entry").path())
-        .filter(|p| p.extension().is_some_and(|x| x == "toml"))
         .collect();
     out.sort();
     out
+}
+
+/// The `*.toml` files directly in `dir`, sorted.
+fn tomls(dir: &Path) -> Vec<PathBuf> {
+    entries(dir)
+        .into_iter()
+        .filter(|p| p.extension().is_some_and(|x| x == "toml"))
+        .collect()
 }
 
 /// Checks what the simulator must know of a loaded training config: its evaluation tasks and the
@@ -103,17 +110,8 @@ fn probe_scenes_load_as_tasks() {
         ("t7_first_move.bddl", 1),
         ("t7_two_moves.bddl", 2),
     ];
-    let mut found: Vec<String> = std::fs::read_dir(&dir)
-        .unwrap_or_else(|e| panic!("{}: {e}", dir.display()))
-        .map(|e| {
-            e.expect("directory entry")
-                .file_name()
-                .to_string_lossy()
-                .into_owned()
-        })
-        .collect();
-    found.sort();
-    assert_eq!(found, want.map(|(f, _)| f.to_string()));
+    let found: Vec<PathBuf> = entries(&dir);
+    assert_eq!(found, want.map(|(f, _)| dir.join(f)));
     for (file, goal_len) in want {
         let path = dir.join(file);
         let task = sim::task::resolve(&path.to_string_lossy())

@@ -14,13 +14,16 @@
 use anyhow::{Context, bail};
 use eval::Policy;
 
+/// The command line.
+const USAGE: &str = "usage: teacher_forced RUN EPISODE.mcap [EPISODE.mcap …] [EVERY]";
+
 /// Recorded |x| + |y| above which a step with the gripper closed counts as a carry.
 const CARRY_XY: f32 = 0.3;
 
 fn main() -> anyhow::Result<()> {
     let args: Vec<String> = std::env::args().skip(1).collect();
     let [run, rest @ ..] = &args[..] else {
-        bail!("usage: teacher_forced RUN EPISODE.mcap [EPISODE.mcap …] [EVERY]");
+        bail!(USAGE);
     };
     let (episodes, every) = match rest {
         [eps @ .., last] if !last.ends_with(".mcap") => (
@@ -31,7 +34,7 @@ fn main() -> anyhow::Result<()> {
         eps => (eps, 16),
     };
     if episodes.is_empty() {
-        bail!("usage: teacher_forced RUN EPISODE.mcap [EPISODE.mcap …] [EVERY]");
+        bail!(USAGE);
     }
     let rd = eval::run::open(run)?;
     let device = eval::run::device(&rd, None)?;
