@@ -48,6 +48,7 @@ fn replay(obs: train::config::ObsMode) {
         // tokens of their own, so both sides compute those too.
         cfg.model.state_relative_cm = vec![2.0, 8.0];
         cfg.model.state_neighbour_cm = vec![3.0];
+        cfg.model.state_distances = true;
         cfg.model.state_parts = true;
     }
     cfg.data.augment = false;
@@ -59,6 +60,7 @@ fn replay(obs: train::config::ObsMode) {
             &opened,
             &cfg.model.state_relative_cm,
             &cfg.model.state_neighbour_cm,
+            cfg.model.state_distances,
             cfg.model.state_fingers,
             cfg.model.state_parts,
         )
@@ -203,7 +205,7 @@ fn the_idle_tail_reaches_the_batch_at_its_weight() {
     cfg.data.idle_tail_weight = 0.5;
     let vocab = train::dataset::RunData::model_vocab(&index).unwrap();
     let opened = data::OpenedDataset::from_index(&data_dir, index).unwrap();
-    let spec = train::dataset::state_spec(&opened, &[], &[], true, false).unwrap();
+    let spec = train::dataset::state_spec(&opened, &[], &[], false, true, false).unwrap();
     let mcfg = cfg.model_config(vocab).unwrap().with_state(
         spec.tokens(),
         spec.num_categories(),

@@ -199,6 +199,10 @@ pub struct ModelSection {
     /// other object, tanh(Δ / s) per axis and scale (none by default; see `model::io::state`).
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub state_neighbour_cm: Vec<f32>,
+    /// State mode: each object token also gets its distance to the gripper and to its nearest
+    /// other object (default false; see `model::io::state`).
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub state_distances: bool,
     /// State mode: whether the robot token carries the finger joint positions (default true;
     /// false leaves the gripper command to be read from the scene, not copied from the fingers).
     #[serde(default = "yes", skip_serializing_if = "is_yes")]
@@ -446,6 +450,11 @@ impl Config {
                     "{key}: only state mode (`obs = \"state\"`) reads it"
                 ));
             }
+        }
+        if self.model.state_distances && self.model.obs != ObsMode::State {
+            return Err(
+                "model.state_distances: only state mode (`obs = \"state\"`) reads it".into(),
+            );
         }
         if !self.model.state_fingers && self.model.obs != ObsMode::State {
             return Err("model.state_fingers: only state mode (`obs = \"state\"`) reads it".into());
@@ -872,16 +881,27 @@ variant = "e_slotssm"
                 .contains("model.state_fingers: only state mode"),
             "{e}"
         );
-        let c =
-            Config::load_with(&p, &sets(&["model.obs=state", "model.state_parts=true"])).unwrap();
-        assert!(c.model.state_parts && c.to_toml().contains("state_parts = true"));
-        let c = Config::load_with(&p, &sets(&["model.obs=state"])).unwrap();
-        assert!(!c.model.state_parts && !c.to_toml().contains("state_parts"));
-        let e = Config::load_with(&p, &sets(&["model.state_parts=true"])).unwrap_err();
-        assert!(
-            e.to_string().contains("model.state_parts: only state mode"),
-            "{e}"
-        );
+        // The two state-mode switches that default to off: written only when on, refused
+        // outside state mode.
+        let on = |c: &Config| (c.model.state_parts, c.model.state_distances);
+        for (key, want) in [
+            ("model.state_parts", (true, false)),
+            ("model.state_distances", (false, true)),
+        ] {
+            let short = key.trim_start_matches("model.");
+            let c =
+                Config::load_with(&p, &sets(&["model.obs=state", &format!("{key}=true")])).unwrap();
+            assert_eq!(on(&c), want, "{key}");
+            assert!(c.to_toml().contains(&format!("{short} = true")), "{key}");
+            let c = Config::load_with(&p, &sets(&["model.obs=state"])).unwrap();
+            assert_eq!(on(&c), (false, false));
+            assert!(!c.to_toml().contains(short), "{key}");
+            let e = Config::load_with(&p, &sets(&[&format!("{key}=true")])).unwrap_err();
+            assert!(
+                e.to_string().contains(&format!("{key}: only state mode")),
+                "{e}"
+            );
+        }
         let c =
             Config::load_with(&p, &sets(&["model.obs=state", "data.state_noise=0.005"])).unwrap();
         assert_eq!(c.data.state_noise, 0.005);

@@ -425,16 +425,20 @@ impl EpisodeSampler {
 /// whether the robot token carries the finger joints (`[model].state_fingers`); `parts`: whether
 /// articulated parts are tokens (`[model].state_parts`; an error when no episode records any);
 /// `neighbour_cm`: the scales of the offsets to each token's nearest other object
-/// (`[model].state_neighbour_cm`).
+/// (`[model].state_neighbour_cm`); `distances`: whether object tokens end with their distances to
+/// the gripper and to their nearest other object (`[model].state_distances`).
 pub fn state_spec(
     data: &OpenedDataset,
     relative_cm: &[f32],
     neighbour_cm: &[f32],
+    distances: bool,
     fingers: bool,
     parts: bool,
 ) -> Result<StateSpec> {
     let new_stats = || {
-        let s = StateStats::new(relative_cm).with_neighbours(neighbour_cm);
+        let s = StateStats::new(relative_cm)
+            .with_neighbours(neighbour_cm)
+            .with_distances(distances);
         let s = if fingers { s } else { s.without_fingers() };
         if parts { s.with_parts() } else { s }
     };

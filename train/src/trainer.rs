@@ -265,6 +265,7 @@ pub fn open_data(cfg: &Config) -> Result<(ModelConfig, RunData)> {
                 &opened,
                 &cfg.model.state_relative_cm,
                 &cfg.model.state_neighbour_cm,
+                cfg.model.state_distances,
                 cfg.model.state_fingers,
                 cfg.model.state_parts,
             )?;

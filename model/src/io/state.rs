@@ -26,6 +26,11 @@
 //!   3-D among the other objects, not their parts; all ones when there is none), zeros for the
 //!   robot and padding. Whether a plate holds a bowl, or a basket the cheese, is then a
 //!   property of the token itself instead of a comparison between tokens (T7's empty plate).
+//! - then, with [`StateSpec::distances`], 2 more numbers per token: the object's distance to the
+//!   gripper ×10 and the distance to its nearest other object ×10 (10 when there is none), zeros
+//!   for the robot and padding. The offsets above are signed per axis, so "the nearer of two
+//!   bowls" or "a plate with nothing on it" is a norm of them, which one attention layer's
+//!   linear keys cannot take; a distance is one number such a key can rank tokens by.
 //!
 //! The numbers are then standardised with the training data's mean and standard deviation per
 //! feature, one set for object tokens and one for the robot token ([`StateStats`]): raw, the
@@ -75,6 +80,10 @@ pub struct StateSpec {
     /// features).
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub neighbour_cm: Vec<f32>,
+    /// Whether each object token ends with its distances to the gripper and to its nearest other
+    /// object (false: no such features).
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub distances: bool,
     /// Whether the robot token carries the finger joint positions (false: zeros there). The
     /// fingers tell the gripper command of every frame but the one that starts a close, so a
     /// policy can learn to copy them and then never starts a close on its own.
@@ -106,6 +115,7 @@ pub struct StateStats {
     max_objects: usize,
     relative_cm: Vec<f32>,
     neighbour_cm: Vec<f32>,
+    distances: bool,
     fingers: bool,
     parts: bool,
     /// Count, sum and sum of squares per feature.
@@ -119,10 +129,10 @@ impl Default for StateStats {
     }
 }
 
-/// Numbers per token with the squashed relative features at `relative_cm` and the neighbour
-/// features at `neighbour_cm`.
-fn features_with(relative_cm: &[f32], neighbour_cm: &[f32]) -> usize {
-    FEATURES + 3 * relative_cm.len() + 3 * neighbour_cm.len()
+/// Numbers per token with the squashed relative features at `relative_cm`, the neighbour
+/// features at `neighbour_cm` and, with `distances`, the two distances.
+fn features_with(relative_cm: &[f32], neighbour_cm: &[f32], distances: bool) -> usize {
+    FEATURES + 3 * relative_cm.len() + 3 * neighbour_cm.len() + 2 * usize::from(distances)
 }
 
 /// The first of `relative_cm` that is not a usable scale (finite and > 0 cm), if any.
@@ -140,12 +150,13 @@ impl StateStats {
     /// Statistics of tokens with the squashed relative features at `relative_cm` (none: the
     /// [`FEATURES`] base numbers only, as [`Default`]).
     pub fn new(relative_cm: &[f32]) -> Self {
-        let zeros = || std::array::from_fn(|_| vec![0.0; features_with(relative_cm, &[])]);
+        let zeros = || std::array::from_fn(|_| vec![0.0; features_with(relative_cm, &[], false)]);
         StateStats {
             names: Vec::new(),
             max_objects: 0,
             relative_cm: relative_cm.to_vec(),
             neighbour_cm: Vec::new(),
+            distances: false,
             fingers: true,
             parts: false,
             objects: zeros(),
@@ -164,13 +175,26 @@ impl StateStats {
     /// `neighbour_cm` ([`StateSpec::neighbour_cm`]); call before adding frames.
     pub fn with_neighbours(mut self, neighbour_cm: &[f32]) -> Self {
         self.neighbour_cm = neighbour_cm.to_vec();
-        let nf = features_with(&self.relative_cm, neighbour_cm);
+        self.resize();
+        self
+    }
+
+    /// The same statistics for tokens that end with the two distances
+    /// ([`StateSpec::distances`]); call before adding frames.
+    pub fn with_distances(mut self, distances: bool) -> Self {
+        self.distances = distances;
+        self.resize();
+        self
+    }
+
+    /// Sizes the sums to the features the options ask for.
+    fn resize(&mut self) {
+        let nf = features_with(&self.relative_cm, &self.neighbour_cm, self.distances);
         for acc in [&mut self.objects, &mut self.robot] {
             for v in acc.iter_mut() {
                 v.resize(nf, 0.0);
             }
         }
-        self
     }
 
     /// The same statistics for tokens that include every articulated part of an object
@@ -193,6 +217,7 @@ impl StateStats {
         let spec = StateSpec {
             relative_cm: self.relative_cm.clone(),
             neighbour_cm: self.neighbour_cm.clone(),
+            distances: self.distances,
             fingers: self.fingers,
             parts: self.parts,
             ..StateSpec::from_names(sources.iter().map(|s| s.name.as_ref()), sources.len())
@@ -227,6 +252,10 @@ impl StateStats {
         assert_eq!(
             self.neighbour_cm, other.neighbour_cm,
             "statistics of tokens with different neighbour scales"
+        );
+        assert_eq!(
+            self.distances, other.distances,
+            "statistics of tokens with and without distances"
         );
         assert_eq!(
             self.fingers, other.fingers,
@@ -270,6 +299,7 @@ impl StateStats {
         StateSpec {
             relative_cm: self.relative_cm.clone(),
             neighbour_cm: self.neighbour_cm.clone(),
+            distances: self.distances,
             fingers: self.fingers,
             parts: self.parts,
             object_norm: norm(&self.objects),
@@ -291,6 +321,7 @@ impl StateSpec {
             max_objects,
             relative_cm: Vec::new(),
             neighbour_cm: Vec::new(),
+            distances: false,
             fingers: true,
             parts: false,
             object_norm: [vec![0.0; FEATURES], vec![1.0; FEATURES]],
@@ -298,9 +329,10 @@ impl StateSpec {
         }
     }
 
-    /// Numbers per token F: [`FEATURES`], then 3 per relative scale, then 3 per neighbour scale.
+    /// Numbers per token F: [`FEATURES`], then 3 per relative scale, then 3 per neighbour scale,
+    /// then 2 with [`StateSpec::distances`].
     pub fn features(&self) -> usize {
-        features_with(&self.relative_cm, &self.neighbour_cm)
+        features_with(&self.relative_cm, &self.neighbour_cm, self.distances)
     }
 
     /// Checks that the standardisation has one mean and deviation per feature and that the
@@ -569,9 +601,17 @@ fn raw_tokens(
         f[6..12].copy_from_slice(&rotation_columns(quat_matrix([
             pose[3], pose[4], pose[5], pose[6],
         ])));
+        let near = (!spec.neighbour_cm.is_empty() || spec.distances)
+            .then(|| nearest_other(objects, o, [pose[0], pose[1], pose[2]]))
+            .flatten();
+        if spec.distances {
+            let at = FEATURES + 3 * (spec.relative_cm.len() + spec.neighbour_cm.len());
+            let dist = |a: [f32; 3]| (0..3).map(|d| (a[d] - pose[d]).powi(2)).sum::<f32>().sqrt();
+            f[at] = dist(eef) * SCALE;
+            f[at + 1] = near.map_or(10.0, |p| dist(p) * SCALE);
+        }
         if !spec.neighbour_cm.is_empty() {
             let at = FEATURES + 3 * spec.relative_cm.len();
-            let near = nearest_other(objects, o, [pose[0], pose[1], pose[2]]);
             for (j, s) in spec.neighbour_cm.iter().enumerate() {
                 for d in 0..3 {
                     f[at + 3 * j + d] = near.map_or(1.0, |p| ((p[d] - pose[d]) * 100.0 / s).tanh());
@@ -819,6 +859,50 @@ mod tests {
         };
         let e = bad.validate().unwrap_err().to_string();
         assert!(e.contains("state neighbour scale 0 cm"), "{e}");
+    }
+
+    #[test]
+    fn distances_rank_objects_by_gripper_and_neighbour_distance() {
+        // The gripper 10 cm above the full plate's bowl; the empty plate 30 cm away in x.
+        let state = [0.0, 0.1, 1.03, 0.0, 0.0, 0.0, 0.0, 0.0];
+        let mut bowl = obj("bowl_1", 0.0, "0");
+        bowl.pose = Some([0.0, 0.1, 0.93, 1.0, 0.0, 0.0, 0.0]);
+        let objects = [obj("plate_1", 0.0, "0"), bowl, obj("plate_2", -0.3, "0")];
+        let mut stats = StateStats::new(&[2.0])
+            .with_neighbours(&[3.0])
+            .with_distances(true);
+        stats.add(&objects, &state).unwrap();
+        let spec = stats.finish();
+        assert!(spec.distances);
+        assert_eq!(spec.features(), FEATURES + 3 + 3 + 2);
+        assert_eq!(spec.object_norm[0].len(), spec.features());
+        spec.validate().unwrap();
+        let nf = spec.features();
+        let raw = StateSpec {
+            object_norm: [vec![0.0; nf], vec![1.0; nf]],
+            robot_norm: [vec![0.0; nf], vec![1.0; nf]],
+            ..spec.clone()
+        };
+        let t = tokens(&raw, &objects, &state, "0", &[0, 1, 2]).unwrap();
+        let d = |k: usize| [t.features[k * nf + nf - 2], t.features[k * nf + nf - 1]];
+        let near = |a: f32, b: f32| (a - b).abs() < 1e-4;
+        // Full plate: 13 cm below the gripper, its bowl 3 cm above it (×10: decimetres).
+        assert!(near(d(0)[0], 1.3) && near(d(0)[1], 0.3), "{:?}", d(0));
+        // Bowl: 10 cm below the gripper, the plate 3 cm below it.
+        assert!(near(d(1)[0], 1.0) && near(d(1)[1], 0.3), "{:?}", d(1));
+        // Empty plate: √(30² + 13²) cm from the gripper, 30 cm from the full plate.
+        let g = (0.3f32 * 0.3 + 0.13 * 0.13).sqrt() * 10.0;
+        assert!(near(d(2)[0], g) && near(d(2)[1], 3.0), "{:?}", d(2));
+        // The robot token carries zeros there; a lone object's neighbour distance is 10 (1 m).
+        assert_eq!(d(3), [0.0, 0.0]);
+        let lone = tokens(&raw, &objects[..1], &state, "0", &[0]).unwrap();
+        assert_eq!(lone.features[nf - 1], 10.0);
+        // Old specs (no such field) read as without distances.
+        let mut json = serde_json::to_value(&spec).unwrap();
+        json.as_object_mut().unwrap().remove("distances");
+        let old: StateSpec = serde_json::from_value(json).unwrap();
+        assert!(!old.distances);
+        assert!(old.validate().is_err(), "norms sized for the distances");
     }
 
     #[test]
