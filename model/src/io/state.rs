@@ -812,6 +812,17 @@ mod tests {
         assert!(e.contains("expected 18 means"), "{e}");
     }
 
+    /// `spec` validated, with mean 0 and deviation 1 for every feature (raw numbers out).
+    fn unstandardised(spec: &StateSpec) -> StateSpec {
+        spec.validate().unwrap();
+        let nf = spec.features();
+        StateSpec {
+            object_norm: [vec![0.0; nf], vec![1.0; nf]],
+            robot_norm: [vec![0.0; nf], vec![1.0; nf]],
+            ..spec.clone()
+        }
+    }
+
     #[test]
     fn neighbour_scales_give_the_offset_to_the_nearest_other_object() {
         let state = [0.0, 0.0, 1.2, 0.0, 0.0, 0.0, 0.0, 0.0];
@@ -827,13 +838,7 @@ mod tests {
         assert_eq!(spec.neighbour_cm, [3.0, 10.0]);
         assert_eq!(spec.features(), FEATURES + 3 + 6);
         assert_eq!(spec.object_norm[0].len(), FEATURES + 9);
-        spec.validate().unwrap();
-        let nf = spec.features();
-        let raw = StateSpec {
-            object_norm: [vec![0.0; nf], vec![1.0; nf]],
-            robot_norm: [vec![0.0; nf], vec![1.0; nf]],
-            ..spec.clone()
-        };
+        let (nf, raw) = (spec.features(), unstandardised(&spec));
         let t = tokens(&raw, &objects, &state, "0", &[0, 1, 2]).unwrap();
         let at = FEATURES + 3;
         let f = |k: usize| &t.features[k * nf + at..(k + 1) * nf];
@@ -876,13 +881,7 @@ mod tests {
         assert!(spec.distances);
         assert_eq!(spec.features(), FEATURES + 3 + 3 + 2);
         assert_eq!(spec.object_norm[0].len(), spec.features());
-        spec.validate().unwrap();
-        let nf = spec.features();
-        let raw = StateSpec {
-            object_norm: [vec![0.0; nf], vec![1.0; nf]],
-            robot_norm: [vec![0.0; nf], vec![1.0; nf]],
-            ..spec.clone()
-        };
+        let (nf, raw) = (spec.features(), unstandardised(&spec));
         let t = tokens(&raw, &objects, &state, "0", &[0, 1, 2]).unwrap();
         let d = |k: usize| [t.features[k * nf + nf - 2], t.features[k * nf + nf - 1]];
         let near = |a: f32, b: f32| (a - b).abs() < 1e-4;
