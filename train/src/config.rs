@@ -444,20 +444,20 @@ impl Config {
             ("model.state_relative_cm", &self.model.state_relative_cm),
             ("model.state_neighbour_cm", &self.model.state_neighbour_cm),
         ];
-        for (key, cm) in scales {
-            if !cm.is_empty() && self.model.obs != ObsMode::State {
+        // The state-mode keys set away from their defaults, refused outside state mode.
+        let state_only = scales
+            .iter()
+            .map(|&(key, cm)| (key, !cm.is_empty()))
+            .chain([
+                ("model.state_distances", self.model.state_distances),
+                ("model.state_fingers", !self.model.state_fingers),
+            ]);
+        for (key, set) in state_only {
+            if set && self.model.obs != ObsMode::State {
                 return Err(format!(
                     "{key}: only state mode (`obs = \"state\"`) reads it"
                 ));
             }
-        }
-        if self.model.state_distances && self.model.obs != ObsMode::State {
-            return Err(
-                "model.state_distances: only state mode (`obs = \"state\"`) reads it".into(),
-            );
-        }
-        if !self.model.state_fingers && self.model.obs != ObsMode::State {
-            return Err("model.state_fingers: only state mode (`obs = \"state\"`) reads it".into());
         }
         let w = self.data.idle_tail_weight;
         if !(w.is_finite() && (0.0..=1.0).contains(&w)) {
