@@ -283,6 +283,12 @@ pub struct DecoderConfig {
     /// depend on the instruction already in the first layer (absent: false).
     #[serde(default)]
     pub film: bool,
+    /// State mode only: a pointer head adds to each chunk step's action a softmax-weighted sum,
+    /// over the current frame's object tokens, of a linear map of each token's own input numbers
+    /// (its offset to the gripper among them), so that "move to that object" is choosing a token
+    /// rather than regressing its position (absent: false; see [`crate::decoder::PointerHead`]).
+    #[serde(default)]
+    pub pointer: bool,
 }
 
 /// Language: word-level tokenizer over a fixed vocabulary + learned embeddings (model.md §8).
@@ -401,6 +407,7 @@ impl ModelConfig {
                 head: ActionHead::L1,
                 queries: QueryLayout::Value,
                 film: false,
+                pointer: false,
             },
             text: TextConfig {
                 vocab: Vec::new(),
@@ -467,6 +474,7 @@ impl ModelConfig {
                 head: ActionHead::L1,
                 queries: QueryLayout::Value,
                 film: false,
+                pointer: false,
             },
             text: TextConfig {
                 vocab: Vec::new(),
@@ -660,6 +668,17 @@ impl ModelConfig {
         }
         if !(self.loss.tau > 0.0 && self.loss.tau.is_finite()) {
             return err("loss.tau must be a finite number > 0".into());
+        }
+        // (Its observation, state, is checked where the model is built: configs are validated
+        // before the dataset tells their observation.)
+        if self.decoder.pointer
+            && (self.decoder.head != ActionHead::L1 || self.decoder.queries != QueryLayout::Step)
+        {
+            return err(
+                "decoder.pointer needs the L1 head (decoder.head = \"l1\") and step queries \
+                 (decoder.queries = \"step\")"
+                    .into(),
+            );
         }
         if let Observation::State {
             tokens,

@@ -7,7 +7,7 @@ use burn::module::Param;
 use burn::nn::{Initializer, LayerNorm, Linear, LinearConfig};
 use burn::prelude::*;
 use burn::tensor::Distribution;
-use burn::tensor::activation::gelu;
+use burn::tensor::activation::{gelu, softmax};
 
 use crate::blocks::{FfnBlock, SelfAttnBlock, layer_norm};
 use crate::config::{ActionHead, DecoderConfig, QueryLayout};
@@ -95,6 +95,79 @@ pub struct DecoderOutput {
     pub actions: Tensor<3>,
     /// Logits `[N, H_a, A, 256]` (discrete head only).
     pub logits: Option<Tensor<4>>,
+    /// The normed outputs of the action queries `[N, Q, D_dec]`.
+    pub queries: Tensor<3>,
+    /// The last layer's outputs at the visual tokens `[N, V, D_dec]` (before the final norm).
+    pub visual: Tensor<3>,
+}
+
+/// Pointer head (state mode): per chunk step h, attention weights a_h over the current frame's
+/// K object tokens (query: step h's decoder output; keys: the tokens' decoder outputs; padding
+/// tokens excluded), and the action term Σ_k a_hk · (W_v x_k + b_v), x_k token k's own input
+/// numbers (`[F]`, standardised: its offset to the gripper among them). Moving to an object is
+/// then choosing its token, and the offset it is read from is exact instead of regressed
+/// through the network. W_v and b_v start at zero, so the head starts as no term at all.
+#[derive(Module, Debug)]
+pub struct PointerHead {
+    /// Norm of the token outputs `[D_dec]`.
+    pub norm: LayerNorm,
+    /// Query map `[D_dec, D_dec]`.
+    pub query: Linear,
+    /// Key map `[D_dec, D_dec]`.
+    pub key: Linear,
+    /// Value map `[F, A]` (zero-initialised).
+    pub value: Linear,
+}
+
+impl PointerHead {
+    /// A head over tokens of `features` numbers for actions of `action_dim` values at width `w`.
+    pub fn new(w: usize, features: usize, action_dim: usize, device: &Device) -> Self {
+        PointerHead {
+            norm: layer_norm(w, device),
+            query: LinearConfig::new(w, w).init(device),
+            key: LinearConfig::new(w, w).init(device),
+            value: LinearConfig::new(features, action_dim)
+                .with_initializer(Initializer::Zeros)
+                .init(device),
+        }
+    }
+
+    /// The pointer's attention weights over the tokens.
+    ///
+    /// # Shapes
+    /// - queries: `[N, H_a, D_dec]`; tokens: `[N, K, D_dec]`; pad: `[N, K]` (true = padding)
+    /// - output: `[N, H_a, K]`, each row summing to 1 over the unpadded tokens
+    pub fn weights(
+        &self,
+        queries: Tensor<3>,
+        tokens: Tensor<3>,
+        pad: Tensor<2, Bool>,
+    ) -> Tensor<3> {
+        let [n, h, w] = queries.dims();
+        let [_, k, _] = tokens.dims();
+        let q = self.query.forward(queries);
+        let keys = self.key.forward(self.norm.forward(tokens));
+        let logits = q.matmul(keys.swap_dims(1, 2)).div_scalar((w as f32).sqrt()); // [N, H, K]
+        let pad = pad.reshape([n, 1, k]).repeat_dim(1, h);
+        softmax(logits.mask_fill(pad, -1e9), 2)
+    }
+
+    /// The action term of each chunk step.
+    ///
+    /// # Shapes
+    /// - queries: `[N, H_a, D_dec]`; tokens: `[N, K, D_dec]`; features: `[N, K, F]`;
+    ///   pad: `[N, K]` (true = padding)
+    /// - output: `[N, H_a, A]`
+    pub fn forward(
+        &self,
+        queries: Tensor<3>,
+        tokens: Tensor<3>,
+        features: Tensor<3>,
+        pad: Tensor<2, Bool>,
+    ) -> Tensor<3> {
+        let a = self.weights(queries, tokens, pad);
+        a.matmul(self.value.forward(features))
+    }
 }
 
 /// The action decoder.
@@ -225,7 +298,9 @@ impl ActionDecoder {
             x = layer.attn.forward(x, Some(pad.clone()));
             x = layer.ffn.forward(x);
         }
+        let hidden = x.clone().narrow(1, 0, v); // [N, V, D_dec]
         let out = self.norm.forward(x.narrow(1, v + l_txt, q)); // [N, Q, D_dec]
+        let queries_out = out.clone();
         if let Some(head) = &self.l1 {
             let per_step = if self.step_queries { w } else { a * w };
             let mut y = head.input.forward(out.reshape([n, h, per_step]));
@@ -238,6 +313,8 @@ impl ActionDecoder {
             DecoderOutput {
                 actions: head.output.forward(head.norm.forward(y)),
                 logits: None,
+                queries: queries_out,
+                visual: hidden,
             }
         } else {
             let logits = self
@@ -250,6 +327,8 @@ impl ActionDecoder {
             DecoderOutput {
                 actions: classes_to_actions(classes),
                 logits: Some(logits),
+                queries: queries_out,
+                visual: hidden,
             }
         }
     }
@@ -270,6 +349,7 @@ mod tests {
             head,
             queries: QueryLayout::Value,
             film: false,
+            pointer: false,
         }
     }
 

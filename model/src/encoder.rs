@@ -53,6 +53,23 @@ impl Frames {
         }
     }
 
+    /// The state tokens with batch and time flattened (None for pixels).
+    ///
+    /// # Shapes
+    /// - output: features `[B·T, N, F]`, categories `[B·T, N]`
+    pub fn state_tokens(&self) -> Option<(Tensor<3>, Tensor<2, Int>)> {
+        match self {
+            Frames::Pixels(_) => None,
+            Frames::State(x, c) => {
+                let [b, t, n, f] = x.dims();
+                Some((
+                    x.clone().reshape([b * t, n, f]),
+                    c.clone().reshape([b * t, n]),
+                ))
+            }
+        }
+    }
+
     /// Frames `start..start + len` of every window.
     pub fn narrow(&self, start: usize, len: usize) -> Frames {
         match self {

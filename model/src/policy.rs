@@ -9,8 +9,8 @@ use burn::module::Param;
 use burn::prelude::*;
 use burn::tensor::Distribution;
 
-use crate::config::{ActionHead, ModelConfig};
-use crate::decoder::{ActionDecoder, DecoderOutput};
+use crate::config::{ActionHead, ModelConfig, Observation};
+use crate::decoder::{ActionDecoder, DecoderOutput, PointerHead};
 use crate::encoder::{Frames, Observer};
 use crate::error::{ModelError, Result};
 use crate::losses;
@@ -83,6 +83,8 @@ pub struct PolicyModel {
     pub text: TextEncoder,
     /// Action decoder.
     pub decoder: ActionDecoder,
+    /// Pointer head over the object tokens (state mode with `decoder.pointer`).
+    pub pointer: Option<PointerHead>,
     /// The configuration this model was built from.
     #[module(skip)]
     pub config: ModelConfig,
@@ -103,6 +105,20 @@ impl PolicyModel {
             )),
             text: TextEncoder::new(&config.text, w, device),
             decoder: ActionDecoder::new(&config.decoder, device),
+            pointer: match config.observation {
+                _ if !config.decoder.pointer => None,
+                Observation::State { features, .. } => Some(PointerHead::new(
+                    w,
+                    features,
+                    config.decoder.action_dim,
+                    device,
+                )),
+                Observation::Pixels => {
+                    return Err(ModelError::Config(
+                        "decoder.pointer: only state mode has object tokens to point at".into(),
+                    ));
+                }
+            },
             config: config.clone(),
         })
     }
@@ -127,18 +143,35 @@ impl PolicyModel {
         (self.token_type.val(), &self.text)
     }
 
-    /// Decodes per frame given language ids.
+    /// Decodes per frame given language ids; with a pointer head, `state` is each frame's
+    /// object tokens (features and categories), the last K of the visual tokens.
     ///
     /// # Shapes
-    /// - visual: `[N, V, D_dec]`, pad `[N, V]`; instruction: `[N, L_txt]`
+    /// - visual: `[N, V, D_dec]`, pad `[N, V]`; instruction: `[N, L_txt]`;
+    ///   state: `[N, K, F]` and `[N, K]`
     pub(crate) fn decode(
         &self,
         visual: Tensor<3>,
         pad: Option<Tensor<2, Bool>>,
         instruction: Tensor<2, Int>,
-    ) -> DecoderOutput {
+        state: Option<(Tensor<3>, Tensor<2, Int>)>,
+    ) -> Result<DecoderOutput> {
         let (lang, lang_pad) = self.text.tokens(instruction);
-        self.decoder.forward(visual, pad, lang, lang_pad)
+        let mut out = self.decoder.forward(visual, pad, lang, lang_pad);
+        if let Some(pointer) = &self.pointer {
+            let Some((features, categories)) = state else {
+                return Err(ModelError::Input(
+                    "the pointer head reads object state but was given none".into(),
+                ));
+            };
+            let [n, v, _] = out.visual.dims();
+            let [_, k, _] = features.dims();
+            let tokens = out.visual.clone().narrow(1, v - k, k);
+            debug_assert_eq!(categories.dims(), [n, k]);
+            let pad = categories.equal_elem(crate::io::state::PAD);
+            out.actions = out.actions + pointer.forward(out.queries.clone(), tokens, features, pad);
+        }
+        Ok(out)
     }
 
     /// Prediction over windows that start at the episode start (no losses).
@@ -180,6 +213,7 @@ impl PolicyModel {
                 cfg.text.max_len
             )));
         }
+        let state = obs.state_tokens();
         let feats = self.encoder.forward(obs)?; // [B, T, M, D_f]
         let (token_type, text) = self.shared();
         let shared = Shared {
@@ -191,7 +225,7 @@ impl PolicyModel {
             .unsqueeze_dim::<3>(1)
             .repeat_dim(1, t)
             .reshape([b * t, l_txt]);
-        let dec = self.decode(win.tokens, win.pad, instr);
+        let dec = self.decode(win.tokens, win.pad, instr, state)?;
         let (ha, a) = (cfg.decoder.horizon, cfg.decoder.action_dim);
         let parts = win.parts;
         let out = WindowOutput {
@@ -1139,5 +1173,205 @@ mod tests {
             eprintln!("{variant}: L_act {initial} → {last}");
             assert!(last < 0.3 * initial, "{variant}: L_act {initial} → {last}");
         }
+    }
+
+    /// A micro state-mode config with the pointer head (step queries, L1 head) over `tokens`
+    /// tokens of which the categories 3 and 4 are objects.
+    fn pointer_config(variant: &str, tokens: usize) -> ModelConfig {
+        let mut cfg = micro(variant).with_state(tokens, 6, crate::io::state::FEATURES);
+        cfg.decoder.queries = crate::config::QueryLayout::Step;
+        cfg.decoder.pointer = true;
+        cfg
+    }
+
+    /// Random state frames `[B, T, K, F]` whose last token of every frame is padding (zeros,
+    /// category PAD) and the others objects of category 3 or 4.
+    fn state_frames(b: usize, t: usize, k: usize, device: &Device) -> Frames {
+        use crate::io::state::{FEATURES, PAD};
+        let feats =
+            Tensor::<4>::random([b, t, k, FEATURES], Distribution::Normal(0.0, 1.0), device);
+        let cats: Vec<i64> = (0..b * t * k)
+            .map(|i| match i % k {
+                j if j == k - 1 => PAD,
+                j => 3 + (j % 2) as i64,
+            })
+            .collect();
+        let keep = Tensor::<4>::ones([b, t, k - 1, FEATURES], device);
+        let keep = Tensor::cat(vec![keep, Tensor::zeros([b, t, 1, FEATURES], device)], 2);
+        Frames::State(
+            feats * keep,
+            Tensor::from_data(TensorData::new(cats, [b, t, k]), device),
+        )
+    }
+
+    #[test]
+    fn pointer_needs_state_step_queries_and_the_l1_head() {
+        let (_guard, device) = test_device();
+        let ok = pointer_config("e_slotssm_oracle", 4);
+        ok.validate().unwrap();
+        let mut pixels = micro("e_slotssm_oracle");
+        pixels.decoder.queries = crate::config::QueryLayout::Step;
+        pixels.decoder.pointer = true;
+        pixels.validate().unwrap();
+        let e = PolicyModel::new(&pixels, &device).unwrap_err().to_string();
+        assert!(e.contains("decoder.pointer: only state mode"), "{e}");
+        let mut value = ok.clone();
+        value.decoder.queries = crate::config::QueryLayout::Value;
+        let mut bins = ok.clone();
+        bins.decoder.head = ActionHead::Bins;
+        for bad in [value, bins] {
+            let e = bad.validate().unwrap_err().to_string();
+            assert!(e.contains("decoder.pointer needs the L1 head"), "{e}");
+        }
+        // Configs written before it read as without.
+        let mut json = serde_json::to_value(&ok.decoder).unwrap();
+        json.as_object_mut().unwrap().remove("pointer");
+        let old: crate::config::DecoderConfig = serde_json::from_value(json).unwrap();
+        assert!(!old.pointer);
+    }
+
+    /// The pointer's weights are a distribution over the unpadded tokens, and its term is their
+    /// weighted value: with one token's key made dominant, the term is that token's value.
+    #[test]
+    fn pointer_weights_skip_padding_and_pick_by_key() {
+        let (_guard, device) = test_device();
+        device.seed(4);
+        let (n, h, k, w, f, a) = (3, 2, 5, 8, 15, 7);
+        let mut head = PointerHead::new(w, f, a, &device);
+        let queries = Tensor::<3>::random([n, h, w], Distribution::Normal(0.0, 1.0), &device);
+        let tokens = Tensor::<3>::random([n, k, w], Distribution::Normal(0.0, 1.0), &device);
+        let features = Tensor::<3>::random([n, k, f], Distribution::Normal(0.0, 1.0), &device);
+        let pad: Vec<bool> = (0..n * k).map(|i| i % k == 0 || i == k + 3).collect();
+        let pad = Tensor::<2, Bool>::from_data(TensorData::new(pad.clone(), [n, k]), &device);
+        let wts = head.weights(queries.clone(), tokens.clone(), pad.clone());
+        assert_eq!(wts.dims(), [n, h, k]);
+        let v = wts.clone().into_data().try_to_vec::<f32>().unwrap();
+        for row in v.chunks(k) {
+            assert!((row.iter().sum::<f32>() - 1.0).abs() < 1e-5, "{row:?}");
+        }
+        for (i, x) in v.iter().enumerate() {
+            let (lane, tok) = (i / (h * k), i % k);
+            if tok == 0 || (lane == 1 && tok == 3) {
+                assert!(*x < 1e-12, "padding token {tok} of lane {lane} weighs {x}");
+            }
+        }
+        // Zero-initialised values: no term at first.
+        let term = head.forward(
+            queries.clone(),
+            tokens.clone(),
+            features.clone(),
+            pad.clone(),
+        );
+        assert_eq!(term.dims(), [n, h, a]);
+        assert_eq!(term.clone().abs().max().into_scalar::<f32>(), 0.0);
+        // Identity values on the first 7 numbers; every query and token 2 (after the norm) along
+        // one direction, keys scaled up: the weight goes to token 2.
+        let eye = Tensor::<2>::eye(f, &device).narrow(1, 0, a);
+        head.value.weight = burn::module::Param::from_tensor(eye);
+        head.query.weight = burn::module::Param::from_tensor(Tensor::eye(w, &device));
+        head.key.weight = burn::module::Param::from_tensor(Tensor::eye(w, &device).mul_scalar(1e3));
+        let sign: Vec<f32> = (0..w)
+            .map(|i| if i % 2 == 0 { 1.0 } else { -1.0 })
+            .collect();
+        let dir = Tensor::<1>::from_floats(sign.as_slice(), &device).reshape([1, 1, w]);
+        let q = dir.clone().repeat_dim(0, n).repeat_dim(1, h);
+        let toks = tokens.slice_assign([0..n, 2..3, 0..w], dir.repeat_dim(0, n));
+        let term = head.forward(q, toks, features.clone(), pad);
+        let want = features.narrow(1, 2, 1).narrow(2, 0, a).repeat_dim(1, h);
+        let diff = (term - want).abs().max().into_scalar::<f32>();
+        assert!(diff < 1e-3, "max diff {diff}");
+    }
+
+    /// With the pointer head, streaming state frames one by one gives the window's actions.
+    #[test]
+    fn pointer_streaming_equals_window() {
+        let (_guard, device) = test_device();
+        device.seed(6);
+        for variant in ["e_slotssm_oracle", "slotvla_h3"] {
+            let cfg = pointer_config(variant, 5);
+            let mut model = PolicyModel::new(&cfg, &device).unwrap();
+            let p = model.pointer.as_mut().unwrap();
+            let [f, a] = p.value.weight.dims();
+            p.value.weight = burn::module::Param::from_tensor(Tensor::random(
+                [f, a],
+                Distribution::Normal(0.0, 0.5),
+                &device,
+            ));
+            let frames = 6;
+            let obs = state_frames(1, frames, 5, &device);
+            let tok = Tokenizer::new(&cfg.text);
+            let instr = tok.encode_batch(&[INSTRUCTIONS[0]], &device);
+            let subgoal = cfg
+                .variant
+                .needs_subgoal_text()
+                .then(|| Tensor::<4, Int>::ones([1, frames, 5, cfg.text.max_len], &device));
+            let full = model
+                .predict(obs.clone(), instr.clone(), subgoal.clone().map(Into::into))
+                .unwrap()
+                .actions;
+            let without = {
+                let mut m = model.clone();
+                m.pointer = None;
+                m.predict(obs.clone(), instr.clone(), subgoal.clone().map(Into::into))
+                    .unwrap()
+                    .actions
+            };
+            let effect = (full.clone() - without).abs().max().into_scalar::<f32>();
+            assert!(effect > 1e-2, "{variant}: the pointer adds only {effect}");
+            let mut policy = StreamingPolicy::new(model, &device).unwrap();
+            let mut worst = 0.0f32;
+            for t in 0..frames {
+                let sg = subgoal
+                    .clone()
+                    .map(|s| Subgoal::from(s.narrow(1, t, 1).squeeze_dim::<3>(1)));
+                let chunk = policy
+                    .act_frames(obs.narrow(t, 1), instr.clone(), sg)
+                    .unwrap();
+                let want = full.clone().narrow(1, t, 1).reshape(chunk.dims());
+                worst = worst.max((chunk - want).abs().max().into_scalar::<f32>());
+            }
+            assert!(worst < 1e-4, "{variant}: max diff {worst}");
+        }
+    }
+
+    /// The pointer head learns to move to "the token of category 4" among distractors: the
+    /// target is a linear map of that token's numbers, at a random place per window.
+    #[test]
+    fn pointer_learns_to_pick_the_token() {
+        let (_guard, device) = test_autodiff_device();
+        device.seed(7);
+        let (b, t, k) = (4, 4, 5);
+        let cfg = pointer_config("e_slotssm_oracle", k);
+        let model = PolicyModel::new(&cfg, &device).unwrap();
+        let mut x = batch(&cfg, b, t, &device);
+        let Frames::State(feats, _) = state_frames(b, t, k, &device) else {
+            unreachable!()
+        };
+        let place: Vec<usize> = (0..b).map(|i| (i * 3 + 1) % (k - 1)).collect();
+        let mut cats = vec![3i64; b * t * k];
+        for (i, &p) in place.iter().enumerate() {
+            for j in 0..t {
+                cats[(i * t + j) * k + p] = 4;
+                cats[(i * t + j) * k + k - 1] = crate::io::state::PAD;
+            }
+        }
+        let picked: Vec<Tensor<4>> = place
+            .iter()
+            .enumerate()
+            .map(|(i, &p)| feats.clone().narrow(0, i, 1).narrow(2, p, 1))
+            .collect();
+        x.actions = Tensor::cat(picked, 0)
+            .narrow(3, 0, 7)
+            .mul_scalar(0.4)
+            .reshape([b, t, 1, 7])
+            .repeat_dim(2, cfg.decoder.horizon);
+        x.obs = Frames::State(
+            feats,
+            Tensor::from_data(TensorData::new(cats, [b, t, k]), &device),
+        );
+        x.subgoal = Some(Tensor::<4, Int>::ones([b, t, k, cfg.text.max_len], &device).into());
+        let (_, initial, last, _) = fit_one_batch(model, &x, 300, 2e-3, 0.0);
+        eprintln!("pointer: L_act {initial} → {last}");
+        assert!(last < 0.2 * initial, "L_act {initial} → {last}");
     }
 }

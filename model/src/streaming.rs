@@ -147,8 +147,9 @@ impl StreamingPolicy {
         instruction: Tensor<2, Int>,
         subgoal: Option<Subgoal<3>>,
     ) -> Result<Tensor<2>> {
+        let state = obs.state_tokens();
         let visual = self.advance(obs, subgoal)?;
-        let out = self.model.decode(visual, None, instruction);
+        let out = self.model.decode(visual, None, instruction, state)?;
         let [_, ha, a] = out.actions.dims();
         Ok(out.actions.reshape([ha, a]))
     }

@@ -630,6 +630,12 @@ impl Config {
         }
         cfg.text.vocab = vocab;
         cfg.validate().map_err(|e| format!("[model]: {e}"))?;
+        if cfg.decoder.pointer && self.model.obs != ObsMode::State {
+            return Err(
+                "model.overrides.decoder.pointer: only state mode (`obs = \"state\"`) reads it"
+                    .into(),
+            );
+        }
         Ok(cfg)
     }
 
@@ -902,6 +908,22 @@ variant = "e_slotssm"
                 "{e}"
             );
         }
+        // The pointer head (a decoder override): state mode with step queries only.
+        let ptr = "model.overrides.decoder.pointer=true";
+        let step = "model.overrides.decoder.queries=\"step\"";
+        let c = Config::load_with(&p, &sets(&["model.obs=state", step, ptr])).unwrap();
+        assert!(c.to_toml().contains("pointer = true"));
+        let e = Config::load_with(&p, &sets(&[step, ptr])).unwrap_err();
+        assert!(
+            e.to_string()
+                .contains("model.overrides.decoder.pointer: only state mode"),
+            "{e}"
+        );
+        let e = Config::load_with(&p, &sets(&["model.obs=state", ptr])).unwrap_err();
+        assert!(
+            e.to_string().contains("decoder.pointer needs the L1 head"),
+            "{e}"
+        );
         let c =
             Config::load_with(&p, &sets(&["model.obs=state", "data.state_noise=0.005"])).unwrap();
         assert_eq!(c.data.state_noise, 0.005);
