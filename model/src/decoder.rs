@@ -102,11 +102,12 @@ pub struct DecoderOutput {
 }
 
 /// Pointer head (state mode): per chunk step h, attention weights a_h over the current frame's
-/// K object tokens (query: step h's decoder output; keys: the tokens' decoder outputs; padding
-/// tokens excluded), and the action term Σ_k a_hk · (W_v x_k + b_v), x_k token k's own input
-/// numbers (`[F]`, standardised: its offset to the gripper among them). Moving to an object is
-/// then choosing its token, and the offset it is read from is exact instead of regressed
-/// through the network. W_v and b_v start at zero, so the head starts as no term at all.
+/// K state tokens — objects, parts and the robot, padding excluded — (query: step h's decoder
+/// output; keys: the tokens' decoder outputs), and the action term Σ_k a_hk · (W_v x_k + b_v),
+/// x_k token k's own input numbers (`[F]`, standardised: its offset to the gripper among them).
+/// Moving to an object is then choosing its token, and the offset it is read from is exact
+/// instead of regressed through the network. W_v and b_v start at zero, so the head starts as
+/// no term at all.
 #[derive(Module, Debug)]
 pub struct PointerHead {
     /// Norm of the token outputs `[D_dec]`.
