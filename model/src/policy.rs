@@ -1128,6 +1128,30 @@ mod tests {
         );
     }
 
+    /// State frames of `feats` `[B, T, K, F]` whose first `objects` tokens are objects, one of
+    /// category 4 at a place that varies by window and the others distractors of category 3, and
+    /// the rest padding; with the features of the category-4 token `[B, T, 1, F]`.
+    fn one_of_category_4(feats: Tensor<4>, objects: usize) -> (Frames, Tensor<4>) {
+        let [b, t, k, _] = feats.dims();
+        let place: Vec<usize> = (0..b).map(|i| (i * 3 + 1) % objects).collect();
+        let mut cats = vec![crate::io::state::PAD; b * t * k];
+        for (i, &p) in place.iter().enumerate() {
+            for j in 0..t {
+                let frame = &mut cats[(i * t + j) * k..][..k];
+                frame[..objects].fill(3);
+                frame[p] = 4;
+            }
+        }
+        let picked: Vec<Tensor<4>> = place
+            .iter()
+            .enumerate()
+            .map(|(i, &p)| feats.clone().narrow(0, i, 1).narrow(2, p, 1))
+            .collect();
+        let device = feats.device();
+        let cats = Tensor::from_data(TensorData::new(cats, [b, t, k]), &device);
+        (Frames::State(feats, cats), Tensor::cat(picked, 0))
+    }
+
     /// State mode learns actions that only the object tokens explain (not the text).
     #[test]
     fn state_model_learns_from_the_object_tokens() {
@@ -1143,28 +1167,14 @@ mod tests {
                 Tensor::<4>::random([b, t, 4, FEATURES], Distribution::Normal(0.0, 2.0), &device);
             // Target: feature a of the one token of category 4, at a random place per window
             // (the others are distractors of category 3): the model has to find it.
-            let place: Vec<usize> = (0..b).map(|i| (i * 3 + 1) % 4).collect();
-            let mut cats = vec![3i64; b * t * 4];
-            for (i, &k) in place.iter().enumerate() {
-                for j in 0..t {
-                    cats[(i * t + j) * 4 + k] = 4;
-                }
-            }
-            let picked: Vec<Tensor<4>> = place
-                .iter()
-                .enumerate()
-                .map(|(i, &k)| feats.clone().narrow(0, i, 1).narrow(2, k, 1))
-                .collect();
-            let target = Tensor::cat(picked, 0)
+            let (obs, picked) = one_of_category_4(feats, 4);
+            let target = picked
                 .narrow(3, 0, 7)
                 .mul_scalar(0.5)
                 .tanh()
                 .reshape([b, t, 1, 7])
                 .repeat_dim(2, cfg.decoder.horizon);
-            x.obs = Frames::State(
-                feats,
-                Tensor::from_data(TensorData::new(cats, [b, t, 4]), &device),
-            );
+            x.obs = obs;
             x.actions = target;
             x.subgoal = variant
                 .ends_with("oracle")
@@ -1347,28 +1357,13 @@ mod tests {
         let Frames::State(feats, _) = state_frames(b, t, k, &device) else {
             unreachable!()
         };
-        let place: Vec<usize> = (0..b).map(|i| (i * 3 + 1) % (k - 1)).collect();
-        let mut cats = vec![3i64; b * t * k];
-        for (i, &p) in place.iter().enumerate() {
-            for j in 0..t {
-                cats[(i * t + j) * k + p] = 4;
-                cats[(i * t + j) * k + k - 1] = crate::io::state::PAD;
-            }
-        }
-        let picked: Vec<Tensor<4>> = place
-            .iter()
-            .enumerate()
-            .map(|(i, &p)| feats.clone().narrow(0, i, 1).narrow(2, p, 1))
-            .collect();
-        x.actions = Tensor::cat(picked, 0)
+        let (obs, picked) = one_of_category_4(feats, k - 1);
+        x.actions = picked
             .narrow(3, 0, 7)
             .mul_scalar(0.4)
             .reshape([b, t, 1, 7])
             .repeat_dim(2, cfg.decoder.horizon);
-        x.obs = Frames::State(
-            feats,
-            Tensor::from_data(TensorData::new(cats, [b, t, k]), &device),
-        );
+        x.obs = obs;
         x.subgoal = Some(Tensor::<4, Int>::ones([b, t, k, cfg.text.max_len], &device).into());
         let (_, initial, last, _) = fit_one_batch(model, &x, 300, 2e-3, 0.0);
         eprintln!("pointer: L_act {initial} → {last}");
