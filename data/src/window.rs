@@ -86,6 +86,9 @@ pub struct WindowConfig {
     /// see [`perturb_positions`]). A regulariser for state-mode training: the action targets stay
     /// the demonstration's.
     pub state_noise: f32,
+    /// Also give each frame its pointer target ([`pointer_targets`], [`WindowSample::targets`]):
+    /// the object the demonstration reaches for next or carries the held object to.
+    pub pointer_targets: bool,
 }
 
 /// Largest norm of the six arm dims of an action that counts as standing still (OpenVLA's no-op
@@ -107,6 +110,80 @@ pub fn idle_tail_start(actions: &[[f32; 7]]) -> usize {
     };
     let g = last[6];
     actions.len() - actions.iter().rev().take_while(|a| is_idle(a, g)).count()
+}
+
+/// Fewest consecutive steps an object must be held to count as grasped (shorter contacts are
+/// brushes of the fingers, not grasps).
+pub const MIN_GRASP_STEPS: usize = 3;
+/// Farthest an object may lie in the table plane (m) from where a carried object is let go to be
+/// that carry's target.
+pub const PLACE_RADIUS: f32 = 0.10;
+/// Most an object may move during a carry (m) and still be its target: what moves along (a
+/// basket's content) is carried, not aimed at.
+pub const STILL_RADIUS: f32 = 0.02;
+
+/// The object (index into each frame's annotations, scene order) that each step of an episode
+/// heads for, from its per-step `frames` of object annotations: while nothing is held, the next
+/// object the demonstration grasps (held for at least [`MIN_GRASP_STEPS`]); while an object is
+/// held, the still object ([`STILL_RADIUS`]) nearest in the table plane to where it is let go,
+/// if within [`PLACE_RADIUS`]. None after the last grasp, for a carry to no object, and without
+/// grasp annotations.
+pub fn pointer_targets(frames: &[&[ObjectAnnotation]]) -> Vec<Option<usize>> {
+    let n = frames.len();
+    let held: Vec<Option<usize>> = frames
+        .iter()
+        .map(|objects| objects.iter().position(|o| o.grasped == Some(true)))
+        .collect();
+    // Grasps: (first step, last step, object).
+    let mut grasps = Vec::new();
+    let mut s = 0;
+    while s < n {
+        let mut e = s;
+        while e + 1 < n && held[e + 1] == held[s] {
+            e += 1;
+        }
+        if let Some(o) = held[s].filter(|_| e + 1 - s >= MIN_GRASP_STEPS) {
+            grasps.push((s, e, o));
+        }
+        s = e + 1;
+    }
+    let mut out = vec![None; n];
+    let mut g = 0;
+    for (t, target) in out.iter_mut().enumerate() {
+        while grasps.get(g).is_some_and(|&(_, e, _)| e < t) {
+            g += 1;
+        }
+        *target = match grasps.get(g) {
+            Some(&(s, e, o)) if s <= t => place_target(frames[s], frames[e], o),
+            Some(&(_, _, o)) => Some(o),
+            None => None,
+        };
+    }
+    out
+}
+
+/// The target of a carry of object `held` from the frame `start` to the frame `end` it is let go
+/// in (see [`pointer_targets`]).
+fn place_target(
+    start: &[ObjectAnnotation],
+    end: &[ObjectAnnotation],
+    held: usize,
+) -> Option<usize> {
+    let at = end.get(held)?.pose?;
+    let dist = |a: &[f32; 7], b: &[f32; 7], dims: usize| {
+        (0..dims).map(|d| (a[d] - b[d]).powi(2)).sum::<f32>().sqrt()
+    };
+    end.iter()
+        .enumerate()
+        .filter(|&(i, _)| i != held)
+        .filter_map(|(i, o)| {
+            let now = o.pose?;
+            let before = start.get(i)?.pose?;
+            (dist(&now, &before, 3) <= STILL_RADIUS).then(|| (i, dist(&now, &at, 2)))
+        })
+        .filter(|&(_, d)| d <= PLACE_RADIUS)
+        .min_by(|a, b| a.1.total_cmp(&b.1))
+        .map(|(i, _)| i)
 }
 
 /// The steps of `actions` whose gripper command differs from the step before's (never step 0).
@@ -131,6 +208,7 @@ impl Default for WindowConfig {
             idle_tail_weight: 0.0,
             switch_weight: 1.0,
             state_noise: 0.0,
+            pointer_targets: false,
         }
     }
 }
@@ -244,6 +322,9 @@ pub struct WindowSample {
     /// `[T]` object annotations per frame, with the subgoal labels as the policy observes them
     /// at that frame (the labels recorded at the step before, see [`observed_labels`]).
     pub objects: Vec<Vec<ObjectAnnotation>>,
+    /// `[T]` each frame's pointer target, an index into its `objects` ([`pointer_targets`]);
+    /// empty unless [`WindowConfig::pointer_targets`].
+    pub targets: Vec<Option<usize>>,
 }
 
 /// Lazily decoding dataset of windows over one split of a dataset directory.
@@ -259,7 +340,13 @@ pub struct WindowDataset {
     /// Per episode of the split, its [`gripper_switches`] (empty unless
     /// [`WindowConfig::switch_weight`] ≠ 1).
     switches: Vec<Vec<usize>>,
+    /// Per episode of the split, its [`pointer_targets`] (empty unless
+    /// [`WindowConfig::pointer_targets`]).
+    targets: Vec<Vec<Option<usize>>>,
 }
+
+/// One episode's scan at open: idle-tail start, gripper switches, pointer targets.
+type Scan = (usize, Vec<usize>, Vec<Option<usize>>);
 
 fn mix(mut z: u64) -> u64 {
     // splitmix64 finaliser
@@ -374,26 +461,52 @@ impl WindowDataset {
             .enumerate()
             .flat_map(|(k, (_, r))| (0..r.len() as u32).map(move |t| (k as u32, t)))
             .collect();
-        // One read of every episode's actions when either needs them.
+        // One read of every episode's steps when any of these needs them.
         let switched = cfg.switch_weight != 1.0;
-        let read = if cfg.mask_idle_tail || switched {
+        let read = if cfg.mask_idle_tail || switched || cfg.pointer_targets {
             readers
                 .par_iter()
-                .map(|(_, r)| -> Result<(usize, Vec<usize>)> {
+                .map(|(_, r)| -> Result<Scan> {
                     let steps = r.read_raw_steps(0..r.len())?;
                     let actions: Vec<[f32; 7]> = steps.iter().map(|s| s.action).collect();
-                    Ok((idle_tail_start(&actions), gripper_switches(&actions)))
+                    let targets = if cfg.pointer_targets {
+                        let frames: Vec<&[ObjectAnnotation]> =
+                            steps.iter().map(|s| s.objects.as_slice()).collect();
+                        pointer_targets(&frames)
+                    } else {
+                        Vec::new()
+                    };
+                    Ok((
+                        idle_tail_start(&actions),
+                        gripper_switches(&actions),
+                        targets,
+                    ))
                 })
                 .collect::<Result<Vec<_>>>()?
         } else {
             Vec::new()
         };
-        let (mut tails, mut switches): (Vec<_>, Vec<_>) = read.into_iter().unzip();
+        let mut tails = Vec::with_capacity(read.len());
+        let mut switches = Vec::with_capacity(read.len());
+        let mut targets = Vec::with_capacity(read.len());
+        for (tail, sw, tg) in read {
+            tails.push(tail);
+            switches.push(sw);
+            targets.push(tg);
+        }
         if !cfg.mask_idle_tail {
             tails.clear();
         }
         if !switched {
             switches.clear();
+        }
+        if cfg.pointer_targets && targets.iter().flatten().all(Option::is_none) {
+            let path = readers.first().map(|(_, r)| r.path().to_path_buf());
+            return Err(DataError::invalid(
+                path.unwrap_or_default(),
+                "pointer targets asked for, but no step of the split's episodes holds an object \
+                 (the episodes record no grasps)",
+            ));
         }
         Ok(WindowDataset {
             readers,
@@ -403,6 +516,7 @@ impl WindowDataset {
             epoch: AtomicU64::new(0),
             tails,
             switches,
+            targets,
         })
     }
 
@@ -607,6 +721,10 @@ impl WindowDataset {
                 })
                 .collect(),
             objects,
+            targets: match self.targets.get(k) {
+                Some(tg) => frame_steps.iter().map(|&f| tg[f]).collect(),
+                None => Vec::new(),
+            },
             frame_steps,
         })
     }
@@ -869,5 +987,83 @@ mod tests {
             objects[1].bbox, [0.0; 4],
             "an unseen object keeps its zero box"
         );
+    }
+
+    /// An object at (x, y) on the table, held or not.
+    fn at(name: &str, x: f32, y: f32, held: bool) -> ObjectAnnotation {
+        ObjectAnnotation {
+            instance_id: 1,
+            name: name.into(),
+            bbox: [0.0; 4],
+            visible: true,
+            subgoal_label: "0".into(),
+            pose: Some([x, y, 0.9, 1.0, 0.0, 0.0, 0.0]),
+            grasped: Some(held),
+            parts: Vec::new(),
+        }
+    }
+
+    #[test]
+    fn pointer_targets_follow_reach_then_carry() {
+        // bowl_1 (0) is grasped at steps 3..=6 and carried onto plate_2 (3), which stays still;
+        // then bowl_2 (1) is grasped at 9..=11 and carried to nowhere near anything; a one-step
+        // touch of plate_1 at step 8 is no grasp.
+        let mut frames = Vec::new();
+        for t in 0..14 {
+            let b1 = if (3..=6).contains(&t) {
+                at("bowl_1", 0.3 * (t - 3) as f32 / 3.0, 0.0, true)
+            } else if t > 6 {
+                at("bowl_1", 0.3, 0.0, false)
+            } else {
+                at("bowl_1", 0.0, 0.0, false)
+            };
+            let b2 = if (9..=11).contains(&t) {
+                at("bowl_2", -0.2, 0.1 + 0.1 * (t - 9) as f32, true)
+            } else if t > 11 {
+                at("bowl_2", -0.2, 0.3, false)
+            } else {
+                at("bowl_2", -0.2, 0.1, false)
+            };
+            let p1 = at("plate_1", 0.5, 0.5, t == 8);
+            let p2 = at("plate_2", 0.31, 0.02, false);
+            frames.push(vec![b1, b2, p1, p2]);
+        }
+        let views: Vec<&[ObjectAnnotation]> = frames.iter().map(Vec::as_slice).collect();
+        let t = pointer_targets(&views);
+        let want: Vec<Option<usize>> = [
+            [Some(0); 3].as_slice(),
+            &[Some(3); 4],
+            &[Some(1); 2], // the touch at 8 is skipped: still reaching for bowl_2
+            &[None; 3],    // carried to (−0.2, 0.3): nothing still within 10 cm
+            &[None; 2],    // after the last grasp
+        ]
+        .concat();
+        assert_eq!(t, want);
+        // Without grasp annotations nothing is a target.
+        for f in &mut frames {
+            for o in f.iter_mut() {
+                o.grasped = None;
+            }
+        }
+        let views: Vec<&[ObjectAnnotation]> = frames.iter().map(Vec::as_slice).collect();
+        assert!(pointer_targets(&views).iter().all(Option::is_none));
+    }
+
+    #[test]
+    fn a_carry_aims_at_what_stays_still_not_at_what_moves_along() {
+        // The basket (0) is carried 0.3 m with the cheese (1) inside it; the other basket (2)
+        // ends 5 cm from where the first is let go.
+        let frames: Vec<Vec<ObjectAnnotation>> = (0..4)
+            .map(|t| {
+                let x = 0.1 * t as f32;
+                vec![
+                    at("basket_1", x, 0.0, true),
+                    at("cream_cheese", x + 0.01, 0.0, false),
+                    at("basket_2", 0.35, 0.0, false),
+                ]
+            })
+            .collect();
+        let views: Vec<&[ObjectAnnotation]> = frames.iter().map(Vec::as_slice).collect();
+        assert_eq!(pointer_targets(&views), vec![Some(2); 4]);
     }
 }

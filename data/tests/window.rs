@@ -634,3 +634,50 @@ fn perturbed_positions_have_the_asked_spread() {
         "mean {mean}, sd {sd}"
     );
 }
+
+#[test]
+fn pointer_targets_reach_the_grasped_object_then_aim_at_the_place() {
+    // The bowl (object 0) is held at steps 4..=7 and let go 5 cm from the plate (object 1).
+    let (dir, _) = dataset_with(&[12], |_, steps| {
+        for (k, s) in steps.iter_mut().enumerate() {
+            s.objects[0].grasped = Some((4..=7).contains(&k));
+            s.objects[1].pose = Some([0.1, 0.12, 0.9, 1.0, 0.0, 0.0, 0.0]);
+        }
+    });
+    let (plain, ptr) = plain_and(dir.path(), |c| WindowConfig {
+        pointer_targets: true,
+        ..c
+    });
+    assert!(
+        plain.chunk(0, 0, 0).unwrap().targets.is_empty(),
+        "off by default"
+    );
+    // Frames 2..=5: reaching (0) at 2 and 3, carrying towards the plate (1) at 4 and 5.
+    let c = ptr.chunk(0, 2, 0).unwrap();
+    assert_eq!(c.frame_steps, vec![2, 3, 4, 5]);
+    assert_eq!(c.targets, vec![Some(0), Some(0), Some(1), Some(1)]);
+    // After the last grasp: none.
+    assert_eq!(ptr.chunk(0, 8, 0).unwrap().targets, vec![None; 4]);
+}
+
+#[test]
+fn pointer_targets_on_episodes_without_grasps_are_an_error() {
+    // The synthetic bowl is touched for single steps only: brushes, not grasps.
+    let (dir, _) = dataset_with(&[12], |_, _| {});
+    let cfg = WindowConfig {
+        past: 3,
+        chunk: 2,
+        image_size: 16,
+        images: false,
+        pointer_targets: true,
+        ..Default::default()
+    };
+    let e = WindowDataset::open(dir.path(), Split::Train, cfg)
+        .err()
+        .expect("no grasps")
+        .to_string();
+    assert!(
+        e.contains("ep0.mcap") && e.contains("record no grasps"),
+        "{e}"
+    );
+}

@@ -54,6 +54,7 @@ fn train_step_ms(variant: &str, reps: usize) -> f64 {
         action_mask: None,
         instruction: tok.encode_batch(&texts, &device),
         subgoal: None,
+        pointer_target: None,
     };
     let mut times = Vec::new();
     for i in 0..=reps {
@@ -189,6 +190,7 @@ fn full_memory_child(t: usize) {
         action_mask: None,
         instruction: tok.encode_batch(&[INSTRUCTION], &device),
         subgoal: None,
+        pointer_target: None,
     };
     let base = proc_status_bytes("VmRSS:").unwrap_or(0);
     let start = Instant::now();

@@ -289,6 +289,11 @@ pub struct DecoderConfig {
     /// rather than regressing its position (absent: false; see [`crate::decoder::PointerHead`]).
     #[serde(default)]
     pub pointer: bool,
+    /// With the pointer head: its keys also read each token's own input numbers through a
+    /// linear map (beside its decoder output), so that a rule on them — the object nearest the
+    /// hand — is one linear score (absent: false).
+    #[serde(default)]
+    pub pointer_input_keys: bool,
 }
 
 /// Language: word-level tokenizer over a fixed vocabulary + learned embeddings (model.md §8).
@@ -321,6 +326,10 @@ pub struct LossConfig {
     /// 1: the loss is the weighted mean over the chunk's entries (1, the default: a plain mean).
     #[serde(default = "unit")]
     pub gripper: f64,
+    /// λ_ptr: weight of the pointer head's cross-entropy to the demonstration's target object
+    /// (needs `decoder.pointer`; 0, the default, leaves the head unsupervised).
+    #[serde(default)]
+    pub pointer: f64,
     /// Contrastive temperature τ.
     pub tau: f64,
     /// Hidden width of the spatial-broadcast slot decoder.
@@ -408,6 +417,7 @@ impl ModelConfig {
                 queries: QueryLayout::Value,
                 film: false,
                 pointer: false,
+                pointer_input_keys: false,
             },
             text: TextConfig {
                 vocab: Vec::new(),
@@ -419,6 +429,7 @@ impl ModelConfig {
                 window: 1.0,
                 slot_recon: 1.0,
                 gripper: 1.0,
+                pointer: 0.0,
                 tau: 1.0,
                 sa_hidden: 64,
             },
@@ -475,6 +486,7 @@ impl ModelConfig {
                 queries: QueryLayout::Value,
                 film: false,
                 pointer: false,
+                pointer_input_keys: false,
             },
             text: TextConfig {
                 vocab: Vec::new(),
@@ -486,6 +498,7 @@ impl ModelConfig {
                 window: 1.0,
                 slot_recon: 1.0,
                 gripper: 1.0,
+                pointer: 0.0,
                 tau: 1.0,
                 sa_hidden: 1024,
             },
@@ -679,6 +692,15 @@ impl ModelConfig {
                  (decoder.queries = \"step\")"
                     .into(),
             );
+        }
+        if self.decoder.pointer_input_keys && !self.decoder.pointer {
+            return err("decoder.pointer_input_keys needs decoder.pointer = true".into());
+        }
+        if !(self.loss.pointer >= 0.0 && self.loss.pointer.is_finite()) {
+            return err("loss.pointer must be a finite number ≥ 0".into());
+        }
+        if self.loss.pointer > 0.0 && !self.decoder.pointer {
+            return err("loss.pointer > 0 needs the pointer head (decoder.pointer = true)".into());
         }
         if let Observation::State {
             tokens,

@@ -99,6 +99,9 @@ pub struct DecoderOutput {
     pub queries: Tensor<3>,
     /// The last layer's outputs at the visual tokens `[N, V, D_dec]` (before the final norm).
     pub visual: Tensor<3>,
+    /// The pointer head's weights over the state tokens `[N, H_a, K]` (set by the policy when
+    /// it has the head; see [`PointerHead::weights`]).
+    pub pointer: Option<Tensor<3>>,
 }
 
 /// Pointer head (state mode): per chunk step h, attention weights a_h over the current frame's
@@ -118,12 +121,22 @@ pub struct PointerHead {
     pub key: Linear,
     /// Value map `[F, A]` (zero-initialised).
     pub value: Linear,
+    /// Key map of the tokens' input numbers `[F, D_dec]` (`decoder.pointer_input_keys`).
+    pub input_key: Option<Linear>,
 }
 
 impl PointerHead {
-    /// A head over tokens of `features` numbers for actions of `action_dim` values at width `w`.
-    pub fn new(w: usize, features: usize, action_dim: usize, device: &Device) -> Self {
+    /// A head over tokens of `features` numbers for actions of `action_dim` values at width `w`;
+    /// with `input_keys`, keys also read the tokens' input numbers.
+    pub fn new(
+        w: usize,
+        features: usize,
+        action_dim: usize,
+        input_keys: bool,
+        device: &Device,
+    ) -> Self {
         PointerHead {
+            input_key: input_keys.then(|| LinearConfig::new(features, w).init(device)),
             norm: layer_norm(w, device),
             query: LinearConfig::new(w, w).init(device),
             key: LinearConfig::new(w, w).init(device),
@@ -136,18 +149,23 @@ impl PointerHead {
     /// The pointer's attention weights over the tokens.
     ///
     /// # Shapes
-    /// - queries: `[N, H_a, D_dec]`; tokens: `[N, K, D_dec]`; pad: `[N, K]` (true = padding)
+    /// - queries: `[N, H_a, D_dec]`; tokens: `[N, K, D_dec]`; features: `[N, K, F]`;
+    ///   pad: `[N, K]` (true = padding)
     /// - output: `[N, H_a, K]`, each row summing to 1 over the unpadded tokens
     pub fn weights(
         &self,
         queries: Tensor<3>,
         tokens: Tensor<3>,
+        features: Tensor<3>,
         pad: Tensor<2, Bool>,
     ) -> Tensor<3> {
         let [n, h, w] = queries.dims();
         let [_, k, _] = tokens.dims();
         let q = self.query.forward(queries);
-        let keys = self.key.forward(self.norm.forward(tokens));
+        let mut keys = self.key.forward(self.norm.forward(tokens));
+        if let Some(input_key) = &self.input_key {
+            keys = keys + input_key.forward(features);
+        }
         let logits = q.matmul(keys.swap_dims(1, 2)).div_scalar((w as f32).sqrt()); // [N, H, K]
         let pad = pad.reshape([n, 1, k]).repeat_dim(1, h);
         softmax(logits.mask_fill(pad, -1e9), 2)
@@ -166,8 +184,19 @@ impl PointerHead {
         features: Tensor<3>,
         pad: Tensor<2, Bool>,
     ) -> Tensor<3> {
-        let a = self.weights(queries, tokens, pad);
-        a.matmul(self.value.forward(features))
+        self.term(
+            self.weights(queries, tokens, features.clone(), pad),
+            features,
+        )
+    }
+
+    /// The action term of given weights: Σ_k a_hk (W_v x_k + b_v).
+    ///
+    /// # Shapes
+    /// - weights: `[N, H_a, K]`; features: `[N, K, F]`
+    /// - output: `[N, H_a, A]`
+    pub fn term(&self, weights: Tensor<3>, features: Tensor<3>) -> Tensor<3> {
+        weights.matmul(self.value.forward(features))
     }
 }
 
@@ -316,6 +345,7 @@ impl ActionDecoder {
                 logits: None,
                 queries: queries_out,
                 visual: hidden,
+                pointer: None,
             }
         } else {
             let logits = self
@@ -330,6 +360,7 @@ impl ActionDecoder {
                 logits: Some(logits),
                 queries: queries_out,
                 visual: hidden,
+                pointer: None,
             }
         }
     }
@@ -351,6 +382,7 @@ mod tests {
             queries: QueryLayout::Value,
             film: false,
             pointer: false,
+            pointer_input_keys: false,
         }
     }
 

@@ -37,6 +37,22 @@ pub fn weight_gripper(mask: Tensor<4>, gripper: f64) -> Tensor<4> {
     mask * w
 }
 
+/// Pointer loss: cross-entropy of the pointer's weights to each frame's target token, averaged
+/// over the chunk steps and the valid frames that have a target.
+///
+/// # Shapes
+/// - weights: `[B, T, H_a, K]` (rows summing to 1); target: `[B, T, K]` one-hot (all zero: no
+///   target); frame_mask: `[B, T]` → `[1]`
+pub fn pointer_ce(weights: Tensor<4>, target: Tensor<3>, frame_mask: Tensor<2>) -> Tensor<1> {
+    let [b, t, _, k] = weights.dims();
+    assert_shape!(target, [b, t, k]);
+    assert_shape!(frame_mask, [b, t]);
+    let target = target * frame_mask.reshape([b, t, 1]);
+    let logp = weights.clamp_min(1e-9).log().mean_dim(2).reshape([b, t, k]); // mean over H_a
+    let den = target.clone().sum().clamp_min(1.0);
+    -(logp * target).sum() / den
+}
+
 /// Action loss of the discrete head: cross-entropy of the 256-bin logits against the targets'
 /// classes, averaged over the entries where `mask` = 1.
 ///
@@ -209,6 +225,34 @@ mod tests {
         assert!((scalar(action_l1(pred.clone(), target.clone(), all)) - 3.0).abs() < 1e-6);
         let some = Tensor::<4>::from_floats([[[[1.0, 0.0], [1.0, 0.0]]]], &device);
         assert!((scalar(action_l1(pred, target, some)) - 2.0).abs() < 1e-6);
+    }
+
+    #[test]
+    fn pointer_ce_is_the_mean_log_weight_of_the_targets() {
+        let (_guard, device) = test_device();
+        // B = 1, T = 3, H_a = 2, K = 2. Frame 0 targets token 1 (weights 0.5 and 0.25), frame 1
+        // has no target, frame 2 targets token 0 but is padding.
+        let w = Tensor::<4>::from_floats(
+            [[
+                [[0.5, 0.5], [0.75, 0.25]],
+                [[0.9, 0.1], [0.9, 0.1]],
+                [[0.01, 0.99], [0.01, 0.99]],
+            ]],
+            &device,
+        );
+        let target = Tensor::<3>::from_floats([[[0.0, 1.0], [0.0, 0.0], [1.0, 0.0]]], &device);
+        let mask = Tensor::<2>::from_floats([[1.0, 1.0, 0.0]], &device);
+        let want = -(0.5f64.ln() + 0.25f64.ln()) / 2.0;
+        let got = scalar(pointer_ce(w.clone(), target.clone(), mask));
+        assert!((got - want).abs() < 1e-5, "{got} vs {want}");
+        // With frame 2 valid, its −ln 0.01 joins the mean over the two targeted frames.
+        let all = Tensor::<2>::ones([1, 3], &device);
+        let want = (want - 0.01f64.ln()) / 2.0;
+        let got = scalar(pointer_ce(w.clone(), target, all.clone()));
+        assert!((got - want).abs() < 1e-5, "{got} vs {want}");
+        // No targets at all: zero.
+        let none = Tensor::<3>::zeros([1, 3, 2], &device);
+        assert_eq!(scalar(pointer_ce(w, none, all)), 0.0);
     }
 
     #[test]

@@ -35,6 +35,9 @@ pub struct WindowBatch {
     pub instruction: Tensor<2, Int>,
     /// Oracle subgoal (token ids `[B, T, G, L_sg]`, see [`Subgoal`]).
     pub subgoal: Option<Subgoal<4>>,
+    /// The pointer's target token of each frame, one-hot over the state tokens `[B, T, K]`
+    /// (all zero where a frame has none); read by the pointer loss.
+    pub pointer_target: Option<Tensor<3>>,
 }
 
 /// Everything the window forward computes.
@@ -52,6 +55,8 @@ pub struct WindowOutput {
     pub predicted: Option<Tensor<4>>,
     /// Windowed predictions Ŝ `[B, T, K, P, D]` (e_slotssm).
     pub window: Option<Tensor<5>>,
+    /// The pointer head's weights over the current frame's state tokens `[B, T, H_a, K]`.
+    pub pointer: Option<Tensor<4>>,
 }
 
 /// The losses of a window batch; `None` where the variant has no such term.
@@ -67,6 +72,8 @@ pub struct Losses {
     pub window: Option<Tensor<1>>,
     /// L_sa `[1]`.
     pub slot_recon: Option<Tensor<1>>,
+    /// L_ptr `[1]`: the pointer's cross-entropy to the target tokens.
+    pub pointer: Option<Tensor<1>>,
 }
 
 /// The policy network of any variant: the shared encoder, language and decoder around the
@@ -111,6 +118,7 @@ impl PolicyModel {
                     w,
                     features,
                     config.decoder.action_dim,
+                    config.decoder.pointer_input_keys,
                     device,
                 )),
                 Observation::Pixels => {
@@ -169,7 +177,9 @@ impl PolicyModel {
             let tokens = out.visual.clone().narrow(1, v - k, k);
             debug_assert_eq!(categories.dims(), [n, k]);
             let pad = categories.equal_elem(crate::io::state::PAD);
-            out.actions = out.actions + pointer.forward(out.queries.clone(), tokens, features, pad);
+            let weights = pointer.weights(out.queries.clone(), tokens, features.clone(), pad);
+            out.actions = out.actions + pointer.term(weights.clone(), features);
+            out.pointer = Some(weights);
         }
         Ok(out)
     }
@@ -237,6 +247,10 @@ impl PolicyModel {
             masks: parts.masks,
             predicted: parts.predicted,
             window: parts.window,
+            pointer: dec.pointer.map(|p| {
+                let k = p.dims()[2];
+                p.reshape([b, t, ha, k])
+            }),
         };
         Ok((out, win.carry))
     }
@@ -351,6 +365,17 @@ impl PolicyModel {
         if let Some(l) = &slot_recon {
             total = total + l.clone().mul_scalar(cfg.loss.slot_recon);
         }
+        let pointer = match (&out.pointer, &batch.pointer_target) {
+            (Some(weights), Some(target)) => Some(losses::pointer_ce(
+                weights.clone(),
+                target.clone(),
+                batch.frame_mask.clone(),
+            )),
+            _ => None,
+        };
+        if let Some(l) = &pointer {
+            total = total + l.clone().mul_scalar(cfg.loss.pointer);
+        }
         Ok((
             out,
             Losses {
@@ -359,6 +384,7 @@ impl PolicyModel {
                 contrastive,
                 window,
                 slot_recon,
+                pointer,
             },
             carry,
         ))
@@ -423,6 +449,7 @@ mod tests {
             action_mask: None,
             instruction: tok.encode_batch(&texts, device),
             subgoal: Some(subgoal.into()),
+            pointer_target: None,
         }
     }
 
@@ -820,6 +847,7 @@ mod tests {
             action_mask: None,
             instruction: x.instruction.clone().narrow(0, 2 * i, 2),
             subgoal: None,
+            pointer_target: None,
         };
         let whole = WindowBatch {
             subgoal: None,
@@ -1236,8 +1264,60 @@ mod tests {
         // Configs written before it read as without.
         let mut json = serde_json::to_value(&ok.decoder).unwrap();
         json.as_object_mut().unwrap().remove("pointer");
+        json.as_object_mut().unwrap().remove("pointer_input_keys");
         let old: crate::config::DecoderConfig = serde_json::from_value(json).unwrap();
-        assert!(!old.pointer);
+        assert!(!old.pointer && !old.pointer_input_keys);
+        // Its input keys and its loss need the head.
+        let mut keys = micro("e_slotssm_oracle");
+        keys.decoder.pointer_input_keys = true;
+        let e = keys.validate().unwrap_err().to_string();
+        assert!(
+            e.contains("decoder.pointer_input_keys needs decoder.pointer"),
+            "{e}"
+        );
+        let mut loss = micro("e_slotssm_oracle");
+        loss.loss.pointer = 1.0;
+        let e = loss.validate().unwrap_err().to_string();
+        assert!(e.contains("loss.pointer > 0 needs the pointer head"), "{e}");
+        let mut nan = ok.clone();
+        nan.loss.pointer = f64::NAN;
+        let e = nan.validate().unwrap_err().to_string();
+        assert!(e.contains("loss.pointer must be a finite number"), "{e}");
+    }
+
+    /// With input keys, the weights read the tokens' own numbers: with the decoder's keys and
+    /// the queries' map at zero, a key map on one input number makes the token with the largest
+    /// such number win.
+    #[test]
+    fn pointer_input_keys_score_the_tokens_own_numbers() {
+        let (_guard, device) = test_device();
+        device.seed(9);
+        let (n, h, k, w, f, a) = (2, 3, 4, 8, 15, 7);
+        let mut head = PointerHead::new(w, f, a, true, &device);
+        let queries = Tensor::<3>::ones([n, h, w], &device);
+        let tokens = Tensor::<3>::random([n, k, w], Distribution::Normal(0.0, 1.0), &device);
+        let features = Tensor::<3>::random([n, k, f], Distribution::Normal(0.0, 1.0), &device);
+        let pad =
+            Tensor::<2, Bool>::from_data(TensorData::new(vec![false; n * k], [n, k]), &device);
+        head.query.weight = burn::module::Param::from_tensor(Tensor::eye(w, &device));
+        head.query.bias = None;
+        head.key.weight = burn::module::Param::from_tensor(Tensor::zeros([w, w], &device));
+        head.key.bias = None;
+        // Key = 100 · feature 3 along every width: score ∝ feature 3.
+        let mut map = vec![0.0f32; f * w];
+        map[3 * w..4 * w].fill(100.0);
+        let input_key = head.input_key.as_mut().expect("input keys");
+        input_key.weight = burn::module::Param::from_tensor(Tensor::from_data(
+            TensorData::new(map, [f, w]),
+            &device,
+        ));
+        input_key.bias = None;
+        let wts = head.weights(queries, tokens, features.clone(), pad);
+        let best = features.narrow(2, 3, 1).argmax(1).reshape([n, 1]); // [N, 1]
+        let picked = wts.argmax(2).reshape([n, h]);
+        let want = best.repeat_dim(1, h);
+        let ints = |x: Tensor<2, Int>| x.into_data().iter::<i64>().collect::<Vec<_>>();
+        assert_eq!(ints(picked), ints(want));
     }
 
     /// The pointer's weights are a distribution over the unpadded tokens, and its term is their
@@ -1247,13 +1327,18 @@ mod tests {
         let (_guard, device) = test_device();
         device.seed(4);
         let (n, h, k, w, f, a) = (3, 2, 5, 8, 15, 7);
-        let mut head = PointerHead::new(w, f, a, &device);
+        let mut head = PointerHead::new(w, f, a, false, &device);
         let queries = Tensor::<3>::random([n, h, w], Distribution::Normal(0.0, 1.0), &device);
         let tokens = Tensor::<3>::random([n, k, w], Distribution::Normal(0.0, 1.0), &device);
         let features = Tensor::<3>::random([n, k, f], Distribution::Normal(0.0, 1.0), &device);
         let pad: Vec<bool> = (0..n * k).map(|i| i % k == 0 || i == k + 3).collect();
         let pad = Tensor::<2, Bool>::from_data(TensorData::new(pad.clone(), [n, k]), &device);
-        let wts = head.weights(queries.clone(), tokens.clone(), pad.clone());
+        let wts = head.weights(
+            queries.clone(),
+            tokens.clone(),
+            features.clone(),
+            pad.clone(),
+        );
         assert_eq!(wts.dims(), [n, h, k]);
         let v = wts.clone().into_data().try_to_vec::<f32>().unwrap();
         for row in v.chunks(k) {
@@ -1368,5 +1453,71 @@ mod tests {
         let (_, initial, last, _) = fit_one_batch(model, &x, 300, 2e-3, 0.0);
         eprintln!("pointer: L_act {initial} → {last}");
         assert!(last < 0.2 * initial, "L_act {initial} → {last}");
+    }
+
+    /// The pointer loss alone draws the weights to the target token (the category-4 one among
+    /// distractors), with no action loss at all; frames without a target add nothing.
+    #[test]
+    fn pointer_loss_draws_the_weights_to_the_target() {
+        use burn::optim::{AdamWConfig, GradientsParams, Optimizer};
+        let (_guard, device) = test_autodiff_device();
+        device.seed(8);
+        let (b, t, k) = (4, 4, 5);
+        let mut cfg = pointer_config("e_slotssm_oracle", k);
+        cfg.loss.action = 0.0;
+        cfg.loss.pointer = 1.0;
+        let mut model = PolicyModel::new(&cfg, &device).unwrap();
+        let mut x = batch(&cfg, b, t, &device);
+        let Frames::State(feats, _) = state_frames(b, t, k, &device) else {
+            unreachable!()
+        };
+        let (obs, _) = one_of_category_4(feats, k - 1);
+        x.obs = obs;
+        x.subgoal = Some(Tensor::<4, Int>::ones([b, t, k, cfg.text.max_len], &device).into());
+        // Every frame targets its category-4 token, except frame 0 of window 0 (none) and the
+        // batch's padding frame (the last of the last window), which the loss leaves out anyway.
+        let mut target = vec![0.0f32; b * t * k];
+        for i in 0..b {
+            for j in 0..t {
+                if (i, j) != (0, 0) && (i, j) != (b - 1, t - 1) {
+                    target[(i * t + j) * k + (i * 3 + 1) % (k - 1)] = 1.0;
+                }
+            }
+        }
+        let target = Tensor::<3>::from_data(TensorData::new(target, [b, t, k]), &device);
+        x.pointer_target = Some(target.clone());
+        let mass = |model: &PolicyModel| -> f32 {
+            let (out, losses) = model.forward(&x).unwrap();
+            let w = out.pointer.expect("the pointer's weights");
+            assert_eq!(w.dims(), [b, t, cfg.decoder.horizon, k]);
+            // L_ptr is the mean −log weight of the targets over the targeted frames' steps.
+            let want = -(w.clone().clamp_min(1e-9).log() * target.clone().reshape([b, t, 1, k]))
+                .sum()
+                .into_scalar::<f32>()
+                / ((b * t - 2) * cfg.decoder.horizon) as f32;
+            let got = scalar(losses.pointer.clone().expect("L_ptr"));
+            assert!((got - want).abs() < 1e-4 * want.max(1.0), "{got} vs {want}");
+            // The mean weight of the targets.
+            (w * target.clone().reshape([b, t, 1, k]))
+                .sum()
+                .into_scalar::<f32>()
+                / ((b * t - 2) * cfg.decoder.horizon) as f32
+        };
+        let before = mass(&model);
+        let mut optim = AdamWConfig::new().with_weight_decay(0.0).init();
+        for _ in 0..60 {
+            let (_, losses) = model.forward(&x).unwrap();
+            let grads = GradientsParams::from_grads(losses.total.backward(), &model);
+            model = optim.step(2e-3, model, grads);
+        }
+        let after = mass(&model);
+        eprintln!("pointer loss: target weight {before} → {after}");
+        assert!(
+            before < 0.5 && after > 0.9,
+            "target weight {before} → {after}"
+        );
+        // Without targets the loss is absent.
+        x.pointer_target = None;
+        assert!(model.forward(&x).unwrap().1.pointer.is_none());
     }
 }

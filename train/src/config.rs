@@ -261,6 +261,10 @@ pub struct LossWeights {
     /// Weight of the gripper dimension within the action loss (the arm's dimensions 1; default 1).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub gripper: Option<f64>,
+    /// λ_ptr: the pointer head's cross-entropy to the object each demonstration step heads for
+    /// (state mode with `model.overrides.decoder.pointer`; default 0).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub pointer: Option<f64>,
 }
 
 /// `[train]`: optimisation, schedule, checkpoints, validation.
@@ -540,6 +544,7 @@ impl Config {
             ("window", w.window),
             ("slot_recon", w.slot_recon),
             ("gripper", w.gripper),
+            ("pointer", w.pointer),
         ] {
             if let Some(v) = v
                 && !finite_nonneg(v)
@@ -628,7 +633,15 @@ impl Config {
         if let Some(v) = w.gripper {
             cfg.loss.gripper = v;
         }
+        if let Some(v) = w.pointer {
+            cfg.loss.pointer = v;
+        }
         cfg.text.vocab = vocab;
+        if cfg.loss.pointer > 0.0 && !cfg.decoder.pointer {
+            return Err("train.loss_weights.pointer: needs the pointer head \
+                 (model.overrides.decoder = { pointer = true })"
+                .into());
+        }
         cfg.validate().map_err(|e| format!("[model]: {e}"))?;
         if cfg.decoder.pointer && self.model.obs != ObsMode::State {
             return Err(
@@ -922,6 +935,23 @@ variant = "e_slotssm"
         let e = Config::load_with(&p, &sets(&["model.obs=state", ptr])).unwrap_err();
         assert!(
             e.to_string().contains("decoder.pointer needs the L1 head"),
+            "{e}"
+        );
+        // Its loss weight: with the head only, and a finite number ≥ 0.
+        let lw = "train.loss_weights.pointer=0.5";
+        let c = Config::load_with(&p, &sets(&["model.obs=state", step, ptr, lw])).unwrap();
+        assert!(c.to_toml().contains("pointer = 0.5"));
+        let e = Config::load_with(&p, &sets(&["model.obs=state", step, lw])).unwrap_err();
+        assert!(
+            e.to_string()
+                .contains("train.loss_weights.pointer: needs the pointer head"),
+            "{e}"
+        );
+        let bad = "train.loss_weights.pointer=-1";
+        let e = Config::load_with(&p, &sets(&["model.obs=state", step, ptr, bad])).unwrap_err();
+        assert!(
+            e.to_string()
+                .contains("train.loss_weights.pointer: must be a finite number ≥ 0"),
             "{e}"
         );
         let c =

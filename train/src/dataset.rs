@@ -170,6 +170,7 @@ impl RunData {
             idle_tail_weight: cfg.data.idle_tail_weight as f32,
             switch_weight: cfg.data.gripper_switch_weight as f32,
             state_noise: cfg.data.state_noise as f32,
+            pointer_targets: model.loss.pointer > 0.0,
         };
         let train = WindowDataset::from_opened(data, Split::Train, win.clone())?;
         if train.is_empty() {

@@ -29,6 +29,9 @@ pub struct Record {
     /// L_sa (slot variants with λ_sa > 0).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub slot_recon: Option<f64>,
+    /// L_ptr (with the pointer head and λ_ptr > 0).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub pointer: Option<f64>,
     /// Global gradient norm before clipping.
     #[serde(default)]
     pub grad_norm: f64,
@@ -61,6 +64,7 @@ impl Record {
             ("contrastive", self.contrastive),
             ("window", self.window),
             ("slot_recon", self.slot_recon),
+            ("pointer", self.pointer),
         ] {
             if let Some(x) = x {
                 v.push((n, x));

@@ -127,6 +127,7 @@ fn record(step: u64, l: &Losses) -> Result<Record> {
         contrastive: opt(&l.contrastive)?,
         window: opt(&l.window)?,
         slot_recon: opt(&l.slot_recon)?,
+        pointer: opt(&l.pointer)?,
         grad_norm: 0.0,
         time_s: 0.0,
         data_s: 0.0,
@@ -184,6 +185,7 @@ pub fn validate(
                 contrastive: r.contrastive.map(|x| w * x),
                 window: r.window.map(|x| w * x),
                 slot_recon: r.slot_recon.map(|x| w * x),
+                pointer: r.pointer.map(|x| w * x),
                 ..r
             },
             Some(s) => Record {
@@ -192,6 +194,7 @@ pub fn validate(
                 contrastive: add(s.contrastive, r.contrastive),
                 window: add(s.window, r.window),
                 slot_recon: add(s.slot_recon, r.slot_recon),
+                pointer: add(s.pointer, r.pointer),
                 ..s
             },
         });
@@ -203,6 +206,7 @@ pub fn validate(
         contrastive: s.contrastive.map(|x| x / batches),
         window: s.window.map(|x| x / batches),
         slot_recon: s.slot_recon.map(|x| x / batches),
+        pointer: s.pointer.map(|x| x / batches),
         ..s
     }))
 }

@@ -320,6 +320,19 @@ impl Processor {
         state::tokens(spec, objects, proprio, Self::robot_label(goal), &order)
     }
 
+    /// The token of object `object` (index into `objects`) in a frame of the episode of `seed`
+    /// (state mode; see [`state::object_token`]).
+    fn target_token(
+        &self,
+        objects: &[ObjectAnnotation],
+        seed: u64,
+        object: usize,
+    ) -> Option<usize> {
+        let spec = self.config.state.as_ref()?;
+        let order = state::order(seed, spec.object_tokens(objects));
+        state::object_token(spec, objects, &order, object)
+    }
+
     /// An upright frame as model input `[3, H, W]` (values in [0, 1]).
     pub fn frame(&self, img: &RgbImage) -> Result<Vec<f32>> {
         if img.channels != 3 || img.data.len() != (img.width * img.height * 3) as usize {
@@ -454,12 +467,13 @@ impl Processor {
         }
         let instructions: Vec<&str> = samples.iter().map(|s| s.instruction.as_str()).collect();
         let l = self.config.text.max_len;
-        let (obs, labels) = match &self.config.state {
+        let (obs, labels, pointer_target) = match &self.config.state {
             None => (
                 Frames::Pixels(Tensor::from_data(
                     TensorData::new(cat(&|s| &s.images), [b, t, 3, h, w]),
                     device,
                 )),
+                None,
                 None,
             ),
             Some(spec) => {
@@ -486,12 +500,30 @@ impl Processor {
                         labels.extend(tok.labels);
                     }
                 }
+                // One-hot target tokens where the windows carry pointer targets.
+                let targeted = samples.iter().any(|s| !s.targets.is_empty());
+                let mut target = vec![0.0f32; if targeted { b * t * n } else { 0 }];
+                for (i, s) in samples.iter().enumerate().filter(|_| targeted) {
+                    for (j, goal) in s.targets.iter().enumerate().take(t) {
+                        let Some(o) = *goal else { continue };
+                        let k = self.target_token(&s.objects[j], s.seed, o).ok_or_else(|| {
+                            ModelError::Input(format!(
+                                "episode {} step {}: pointer target {o} is not one of its {} objects",
+                                s.episode,
+                                s.frame_steps[j],
+                                s.objects[j].len()
+                            ))
+                        })?;
+                        target[(i * t + j) * n + k] = 1.0;
+                    }
+                }
                 (
                     Frames::State(
                         Tensor::from_data(TensorData::new(features, [b, t, n, nf]), device),
                         Tensor::from_data(TensorData::new(categories, [b, t, n]), device),
                     ),
                     Some((labels, n)),
+                    targeted.then(|| Tensor::from_data(TensorData::new(target, [b, t, n]), device)),
                 )
             }
         };
@@ -568,6 +600,7 @@ impl Processor {
             )),
             instruction: self.tokenizer.encode_batch(&instructions, device),
             subgoal,
+            pointer_target,
         })
     }
 

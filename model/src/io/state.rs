@@ -415,6 +415,25 @@ pub fn order(seed: u64, n: usize) -> Vec<usize> {
     p
 }
 
+/// The token that object `object` (an index into `objects`, scene order) is given at under
+/// `order` (see [`order`]): its own token, not one of its parts'. None when out of range.
+pub fn object_token(
+    spec: &StateSpec,
+    objects: &[ObjectAnnotation],
+    order: &[usize],
+    object: usize,
+) -> Option<usize> {
+    if object >= objects.len() {
+        return None;
+    }
+    let source = if spec.parts {
+        objects[..object].iter().map(|o| 1 + o.parts.len()).sum()
+    } else {
+        object
+    };
+    order.iter().position(|&i| i == source)
+}
+
 /// Rotation matrix (row-major) of a unit quaternion (w, x, y, z).
 fn quat_matrix([w, x, y, z]: [f32; 4]) -> [[f32; 3]; 3] {
     let n = (w * w + x * x + y * y + z * z).sqrt().max(1e-12);
@@ -980,6 +999,14 @@ mod tests {
         // Scene order: bowl, cabinet, its top handle, its middle handle; fed reversed.
         let t = tokens(&raw, &objects, &state, "0", &[3, 2, 1, 0]).unwrap();
         assert_eq!(t.categories, vec![5, 6, 4, 3, ROBOT]);
+        // The pointer's target token of an object is its own, not one of its parts'.
+        let token = |o| object_token(&raw, &objects, &[3, 2, 1, 0], o);
+        assert_eq!((token(0), token(1), token(2)), (Some(3), Some(2), None));
+        let flat = StateSpec {
+            parts: false,
+            ..raw.clone()
+        };
+        assert_eq!(object_token(&flat, &objects, &[1, 0], 0), Some(1));
         assert_eq!(
             t.labels[..3],
             ["one: open drawer"; 3],
