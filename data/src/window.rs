@@ -500,6 +500,9 @@ impl WindowDataset {
         if !switched {
             switches.clear();
         }
+        if !cfg.pointer_targets {
+            targets.clear();
+        }
         if cfg.pointer_targets && targets.iter().flatten().all(Option::is_none) {
             let path = readers.first().map(|(_, r)| r.path().to_path_buf());
             return Err(DataError::invalid(

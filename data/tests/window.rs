@@ -652,6 +652,12 @@ fn pointer_targets_reach_the_grasped_object_then_aim_at_the_place() {
         plain.chunk(0, 0, 0).unwrap().targets.is_empty(),
         "off by default"
     );
+    // Off beside another per-episode scan (the idle tail's): still none.
+    let (_, tail) = plain_and(dir.path(), |c| WindowConfig {
+        mask_idle_tail: true,
+        ..c
+    });
+    assert!(tail.chunk(0, 0, 0).unwrap().targets.is_empty());
     // Frames 2..=5: reaching (0) at 2 and 3, carrying towards the plate (1) at 4 and 5.
     let c = ptr.chunk(0, 2, 0).unwrap();
     assert_eq!(c.frame_steps, vec![2, 3, 4, 5]);
