@@ -171,26 +171,7 @@ impl PointerHead {
         softmax(logits.mask_fill(pad, -1e9), 2)
     }
 
-    /// The action term of each chunk step.
-    ///
-    /// # Shapes
-    /// - queries: `[N, H_a, D_dec]`; tokens: `[N, K, D_dec]`; features: `[N, K, F]`;
-    ///   pad: `[N, K]` (true = padding)
-    /// - output: `[N, H_a, A]`
-    pub fn forward(
-        &self,
-        queries: Tensor<3>,
-        tokens: Tensor<3>,
-        features: Tensor<3>,
-        pad: Tensor<2, Bool>,
-    ) -> Tensor<3> {
-        self.term(
-            self.weights(queries, tokens, features.clone(), pad),
-            features,
-        )
-    }
-
-    /// The action term of given weights: Σ_k a_hk (W_v x_k + b_v).
+    /// The action term of each chunk step for its weights ([`PointerHead::weights`]): Σ_k a_hk (W_v x_k + b_v).
     ///
     /// # Shapes
     /// - weights: `[N, H_a, K]`; features: `[N, K, F]`

@@ -1351,12 +1351,7 @@ mod tests {
             }
         }
         // Zero-initialised values: no term at first.
-        let term = head.forward(
-            queries.clone(),
-            tokens.clone(),
-            features.clone(),
-            pad.clone(),
-        );
+        let term = head.term(wts, features.clone());
         assert_eq!(term.dims(), [n, h, a]);
         assert_eq!(term.clone().abs().max().into_scalar::<f32>(), 0.0);
         // Identity values on the first 7 numbers; every query and token 2 (after the norm) along
@@ -1371,7 +1366,8 @@ mod tests {
         let dir = Tensor::<1>::from_floats(sign.as_slice(), &device).reshape([1, 1, w]);
         let q = dir.clone().repeat_dim(0, n).repeat_dim(1, h);
         let toks = tokens.slice_assign([0..n, 2..3, 0..w], dir.repeat_dim(0, n));
-        let term = head.forward(q, toks, features.clone(), pad);
+        let wts = head.weights(q, toks, features.clone(), pad);
+        let term = head.term(wts, features.clone());
         let want = features.narrow(1, 2, 1).narrow(2, 0, a).repeat_dim(1, h);
         let diff = (term - want).abs().max().into_scalar::<f32>();
         assert!(diff < 1e-3, "max diff {diff}");
@@ -1459,7 +1455,7 @@ mod tests {
     /// distractors), with no action loss at all; frames without a target add nothing.
     #[test]
     fn pointer_loss_draws_the_weights_to_the_target() {
-        use burn::optim::{AdamWConfig, GradientsParams, Optimizer};
+        use burn::optim::{AdamWConfig, GradientsParams};
         let (_guard, device) = test_autodiff_device();
         device.seed(8);
         let (b, t, k) = (4, 4, 5);
@@ -1472,19 +1468,18 @@ mod tests {
             unreachable!()
         };
         let (obs, _) = one_of_category_4(feats, k - 1);
-        x.obs = obs;
-        x.subgoal = Some(Tensor::<4, Int>::ones([b, t, k, cfg.text.max_len], &device).into());
+        let Frames::State(_, cats) = &obs else {
+            unreachable!()
+        };
         // Every frame targets its category-4 token, except frame 0 of window 0 (none) and the
         // batch's padding frame (the last of the last window), which the loss leaves out anyway.
-        let mut target = vec![0.0f32; b * t * k];
-        for i in 0..b {
-            for j in 0..t {
-                if (i, j) != (0, 0) && (i, j) != (b - 1, t - 1) {
-                    target[(i * t + j) * k + (i * 3 + 1) % (k - 1)] = 1.0;
-                }
-            }
-        }
-        let target = Tensor::<3>::from_data(TensorData::new(target, [b, t, k]), &device);
+        let mut keep = vec![1.0f32; b * t];
+        keep[0] = 0.0;
+        keep[b * t - 1] = 0.0;
+        let keep = Tensor::<3>::from_data(TensorData::new(keep, [b, t, 1]), &device);
+        let target = cats.clone().equal_elem(4).float() * keep;
+        x.obs = obs;
+        x.subgoal = Some(Tensor::<4, Int>::ones([b, t, k, cfg.text.max_len], &device).into());
         x.pointer_target = Some(target.clone());
         let mass = |model: &PolicyModel| -> f32 {
             let (out, losses) = model.forward(&x).unwrap();

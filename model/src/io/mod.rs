@@ -503,7 +503,7 @@ impl Processor {
                 // One-hot target tokens where the windows carry pointer targets.
                 let targeted = samples.iter().any(|s| !s.targets.is_empty());
                 let mut target = vec![0.0f32; if targeted { b * t * n } else { 0 }];
-                for (i, s) in samples.iter().enumerate().filter(|_| targeted) {
+                for (i, s) in samples.iter().enumerate() {
                     for (j, goal) in s.targets.iter().enumerate().take(t) {
                         let Some(o) = *goal else { continue };
                         let k = self.target_token(&s.objects[j], s.seed, o).ok_or_else(|| {
