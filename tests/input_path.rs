@@ -4,7 +4,8 @@
 //! actions) gives the same model tensors, bit for bit: frames (or in state mode the object
 //! tokens and their categories), instruction ids and the oracle subgoal ids of every step
 //! (the per-object labels; with pixels also the objects' boxes from the segmentation, which
-//! the model matches to its slots).
+//! the model matches to its slots), and the progress loss's target is the subgoals done as the
+//! live environment reports them.
 
 use burn::prelude::*;
 use model::Frames;
@@ -101,6 +102,7 @@ fn replay(obs: train::config::ObsMode) {
     let mut subgoal_changes = 0;
     let mut seen_boxes = 0;
     let mut previous_subgoal = None;
+    let mut max_done = 0;
     for t in 0..n {
         let live = policy.input(&env, &obs_t).unwrap();
         // Window ending at step t (past = w − 1, future = 0): its last frame is step t.
@@ -145,10 +147,17 @@ fn replay(obs: train::config::ObsMode) {
             subgoal_changes += 1;
             previous_subgoal = Some(sub_live);
         }
+        // The progress loss's target: the subgoals done as the live environment reports them
+        // with this observation.
+        let done = batch.progress.expect("windows with goal progress");
+        let live_done = obs_t.goal.as_ref().map_or(0, |g| g.satisfied as i64);
+        assert_eq!(ints(done.narrow(1, w - 1, 1))[0], live_done, "step {t}");
+        max_done = max_done.max(live_done);
         let step = episode.read_step(t).unwrap();
         obs_t = env.step(&step.action).unwrap();
     }
     assert!(subgoal_changes >= 2, "the subgoal input never changed");
+    assert!(max_done >= 1, "the progress target never moved from 0");
     if obs == train::config::ObsMode::Pixels {
         assert!(
             seen_boxes >= n,

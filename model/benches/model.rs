@@ -55,6 +55,7 @@ fn train_step_ms(variant: &str, reps: usize) -> f64 {
         instruction: tok.encode_batch(&texts, &device),
         subgoal: None,
         pointer_target: None,
+        progress: None,
     };
     let mut times = Vec::new();
     for i in 0..=reps {
@@ -191,6 +192,7 @@ fn full_memory_child(t: usize) {
         instruction: tok.encode_batch(&[INSTRUCTION], &device),
         subgoal: None,
         pointer_target: None,
+        progress: None,
     };
     let base = proc_status_bytes("VmRSS:").unwrap_or(0);
     let start = Instant::now();

@@ -330,6 +330,12 @@ pub struct LossConfig {
     /// (needs `decoder.pointer`; 0, the default, leaves the head unsupervised).
     #[serde(default)]
     pub pointer: f64,
+    /// λ_prog: weight of the progress head's cross-entropy to the number of subgoals done so far
+    /// (the recorded goal progress), read off the decoder's visual tokens of each frame; a
+    /// training-time signal only, the policy never observes the progress. 0, the default,
+    /// builds no head.
+    #[serde(default)]
+    pub progress: f64,
     /// Contrastive temperature τ.
     pub tau: f64,
     /// Hidden width of the spatial-broadcast slot decoder.
@@ -430,6 +436,7 @@ impl ModelConfig {
                 slot_recon: 1.0,
                 gripper: 1.0,
                 pointer: 0.0,
+                progress: 0.0,
                 tau: 1.0,
                 sa_hidden: 64,
             },
@@ -499,6 +506,7 @@ impl ModelConfig {
                 slot_recon: 1.0,
                 gripper: 1.0,
                 pointer: 0.0,
+                progress: 0.0,
                 tau: 1.0,
                 sa_hidden: 1024,
             },
@@ -701,6 +709,9 @@ impl ModelConfig {
         }
         if self.loss.pointer > 0.0 && !self.decoder.pointer {
             return err("loss.pointer > 0 needs the pointer head (decoder.pointer = true)".into());
+        }
+        if !(self.loss.progress >= 0.0 && self.loss.progress.is_finite()) {
+            return err("loss.progress must be a finite number ≥ 0".into());
         }
         if let Observation::State {
             tokens,

@@ -1,5 +1,5 @@
-//! Slot-level heads: the windowed prediction head "Past MLP" (model.md §5), Slot Fusion (§6)
-//! and the spatial-broadcast slot decoder of L_sa (§2).
+//! Slot-level heads: the windowed prediction head "Past MLP" (model.md §5), Slot Fusion (§6),
+//! the spatial-broadcast slot decoder of L_sa (§2) and the training-only progress head.
 
 use burn::module::Param;
 use burn::nn::{LayerNorm, Linear, LinearConfig};
@@ -136,6 +136,50 @@ impl SlotDecoder {
     }
 }
 
+/// Classes of the progress head: subgoals done 0 … 15 (more are counted as 15).
+pub const PROGRESS_CLASSES: usize = 16;
+
+/// Progress head: logits over the number of subgoals done so far, read from one frame's visual
+/// tokens (their mean and their maximum, through an MLP). Trained with L_prog only; nothing at
+/// inference reads it, so it can only shape what the tokens (and the memory behind them) keep.
+#[derive(Module, Debug)]
+pub struct ProgressHead {
+    /// MLP 2D → D → [`PROGRESS_CLASSES`] (GELU).
+    pub mlp: Mlp,
+}
+
+impl ProgressHead {
+    /// Builds the head for tokens of width `d`.
+    pub fn new(d: usize, device: &Device) -> Self {
+        ProgressHead {
+            mlp: Mlp::new(2 * d, d, PROGRESS_CLASSES, Act::Gelu, device),
+        }
+    }
+
+    /// # Shapes
+    /// - tokens: `[N, V, D]`; pad: `[N, V]` (true = not a token of this frame: a history
+    ///   frame before the window start), at least one token of each row unpadded
+    /// - output: logits `[N, C]`
+    pub fn forward(&self, tokens: Tensor<3>, pad: Option<Tensor<2, Bool>>) -> Tensor<2> {
+        let [n, v, _] = tokens.dims();
+        let (mean, max) = match pad {
+            None => (tokens.clone().mean_dim(1), tokens.max_dim(1)),
+            Some(pad) => {
+                assert_shape!(pad, [n, v]);
+                let keep = pad.bool_not().float().reshape([n, v, 1]);
+                let count = keep.clone().sum_dim(1).clamp_min(1.0);
+                let mean = (tokens.clone() * keep.clone()).sum_dim(1) / count;
+                // Padded tokens pushed far below any real value before the maximum.
+                let max = (tokens + (keep - 1.0) * 1e9).max_dim(1);
+                (mean, max)
+            }
+        };
+        self.mlp
+            .forward(Tensor::cat(vec![mean, max], 2))
+            .reshape([n, PROGRESS_CLASSES])
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -156,5 +200,26 @@ mod tests {
         assert_eq!(masks.dims(), [6, 4, 16]);
         let sums = masks.sum_dim(1).into_data().try_to_vec::<f32>().unwrap();
         assert!(sums.iter().all(|v| (v - 1.0).abs() < 1e-5));
+    }
+
+    #[test]
+    fn progress_head_ignores_padded_tokens() {
+        let (_guard, device) = test_device();
+        let head = ProgressHead::new(8, &device);
+        let real = Tensor::<3>::random([2, 3, 8], Distribution::Default, &device);
+        let junk = Tensor::<3>::random([2, 2, 8], Distribution::Uniform(50.0, 60.0), &device);
+        let padded = Tensor::cat(vec![junk, real.clone()], 1); // [2, 5, 8]
+        let pad = Tensor::<2, Bool>::from_data(
+            TensorData::new([true, true, false, false, false].repeat(2), [2, 5]),
+            &device,
+        );
+        let a = head.forward(real, None);
+        let b = head.forward(padded.clone(), Some(pad));
+        assert_eq!(a.dims(), [2, PROGRESS_CLASSES]);
+        let diff = (a.clone() - b).abs().max().into_scalar::<f32>();
+        assert!(diff < 1e-4, "padded tokens changed the logits by {diff}");
+        // Unmasked, the junk does change them.
+        let c = head.forward(padded, None);
+        assert!((a - c).abs().max().into_scalar::<f32>() > 1e-2);
     }
 }

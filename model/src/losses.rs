@@ -53,6 +53,22 @@ pub fn pointer_ce(weights: Tensor<4>, target: Tensor<3>, frame_mask: Tensor<2>) 
     -(logp * target).sum() / den
 }
 
+/// Progress loss: cross-entropy of the progress head's logits to each frame's number of subgoals
+/// done, averaged over the valid frames.
+///
+/// # Shapes
+/// - logits: `[B, T, C]`; target: `[B, T]` classes in 0 … C−1; frame_mask: `[B, T]` → `[1]`
+pub fn progress_ce(logits: Tensor<3>, target: Tensor<2, Int>, frame_mask: Tensor<2>) -> Tensor<1> {
+    let [b, t, _] = logits.dims();
+    assert_shape!(target, [b, t]);
+    assert_shape!(frame_mask, [b, t]);
+    let nll = log_softmax(logits, 2)
+        .gather(2, target.unsqueeze_dim::<3>(2))
+        .reshape([b, t])
+        .neg();
+    masked_mean(nll, frame_mask)
+}
+
 /// Action loss of the discrete head: cross-entropy of the 256-bin logits against the targets'
 /// classes, averaged over the entries where `mask` = 1.
 ///
@@ -253,6 +269,27 @@ mod tests {
         // No targets at all: zero.
         let none = Tensor::<3>::zeros([1, 3, 2], &device);
         assert_eq!(scalar(pointer_ce(w, none, all)), 0.0);
+    }
+
+    #[test]
+    fn progress_ce_is_the_mean_nll_of_the_valid_frames() {
+        let (_guard, device) = test_device();
+        // B = 1, T = 3, C = 3: frame 0 uniform (target 2), frame 1 sure of its target 0,
+        // frame 2 padding.
+        let logits = Tensor::<3>::from_floats(
+            [[[0.0, 0.0, 0.0], [20.0, 0.0, 0.0], [0.0, 5.0, 0.0]]],
+            &device,
+        );
+        let target = Tensor::<2, Int>::from_ints([[2, 0, 0]], &device);
+        let mask = Tensor::<2>::from_floats([[1.0, 1.0, 0.0]], &device);
+        let want = 3f64.ln() / 2.0;
+        let got = scalar(progress_ce(logits.clone(), target.clone(), mask));
+        assert!((got - want).abs() < 1e-5, "{got} vs {want}");
+        // Frame 2 valid: −log softmax(0, 5, 0)[0] = ln(2 + e⁵) joins the mean.
+        let all = Tensor::<2>::ones([1, 3], &device);
+        let want = (3f64.ln() + (2.0 + 5f64.exp()).ln()) / 3.0;
+        let got = scalar(progress_ce(logits, target, all));
+        assert!((got - want).abs() < 1e-4, "{got} vs {want}");
     }
 
     #[test]

@@ -13,6 +13,7 @@ use crate::config::{ActionHead, ModelConfig, Observation};
 use crate::decoder::{ActionDecoder, DecoderOutput, PointerHead};
 use crate::encoder::{Frames, Observer};
 use crate::error::{ModelError, Result};
+use crate::heads::ProgressHead;
 use crate::losses;
 use crate::text::TextEncoder;
 pub use crate::variants::{Carry, Subgoal};
@@ -38,6 +39,9 @@ pub struct WindowBatch {
     /// The pointer's target token of each frame, one-hot over the state tokens `[B, T, K]`
     /// (all zero where a frame has none); read by the pointer loss.
     pub pointer_target: Option<Tensor<3>>,
+    /// Each frame's number of subgoals done (as observed before its action), clamped to the
+    /// progress head's classes `[B, T]`; read by the progress loss.
+    pub progress: Option<Tensor<2, Int>>,
 }
 
 /// Everything the window forward computes.
@@ -57,6 +61,8 @@ pub struct WindowOutput {
     pub window: Option<Tensor<5>>,
     /// The pointer head's weights over the current frame's state tokens `[B, T, H_a, K]`.
     pub pointer: Option<Tensor<4>>,
+    /// The progress head's logits over the subgoals done `[B, T, C]` (with `loss.progress` > 0).
+    pub progress: Option<Tensor<3>>,
 }
 
 /// The losses of a window batch; `None` where the variant has no such term.
@@ -74,6 +80,8 @@ pub struct Losses {
     pub slot_recon: Option<Tensor<1>>,
     /// L_ptr `[1]`: the pointer's cross-entropy to the target tokens.
     pub pointer: Option<Tensor<1>>,
+    /// L_prog `[1]`: the progress head's cross-entropy to the subgoals done.
+    pub progress: Option<Tensor<1>>,
 }
 
 /// The policy network of any variant: the shared encoder, language and decoder around the
@@ -92,6 +100,8 @@ pub struct PolicyModel {
     pub decoder: ActionDecoder,
     /// Pointer head over the object tokens (state mode with `decoder.pointer`).
     pub pointer: Option<PointerHead>,
+    /// Progress head over each frame's visual tokens (with `loss.progress` > 0; training only).
+    pub progress: Option<ProgressHead>,
     /// The configuration this model was built from.
     #[module(skip)]
     pub config: ModelConfig,
@@ -127,6 +137,7 @@ impl PolicyModel {
                     ));
                 }
             },
+            progress: (config.loss.progress > 0.0).then(|| ProgressHead::new(w, device)),
             config: config.clone(),
         })
     }
@@ -235,6 +246,13 @@ impl PolicyModel {
             .unsqueeze_dim::<3>(1)
             .repeat_dim(1, t)
             .reshape([b * t, l_txt]);
+        let progress = self.progress.as_ref().map(|head| {
+            head.forward(win.tokens.clone(), win.pad.clone()).reshape([
+                b,
+                t,
+                crate::heads::PROGRESS_CLASSES,
+            ])
+        });
         let dec = self.decode(win.tokens, win.pad, instr, state)?;
         let (ha, a) = (cfg.decoder.horizon, cfg.decoder.action_dim);
         let parts = win.parts;
@@ -251,6 +269,7 @@ impl PolicyModel {
                 let k = p.dims()[2];
                 p.reshape([b, t, ha, k])
             }),
+            progress,
         };
         Ok((out, win.carry))
     }
@@ -376,6 +395,22 @@ impl PolicyModel {
         if let Some(l) = &pointer {
             total = total + l.clone().mul_scalar(cfg.loss.pointer);
         }
+        let progress = match (&out.progress, &batch.progress) {
+            (Some(logits), Some(target)) => Some(losses::progress_ce(
+                logits.clone(),
+                target.clone(),
+                batch.frame_mask.clone(),
+            )),
+            (Some(_), None) => {
+                return Err(ModelError::Input(
+                    "loss.progress > 0, and the batch carries no progress targets".into(),
+                ));
+            }
+            _ => None,
+        };
+        if let Some(l) = &progress {
+            total = total + l.clone().mul_scalar(cfg.loss.progress);
+        }
         Ok((
             out,
             Losses {
@@ -385,6 +420,7 @@ impl PolicyModel {
                 window,
                 slot_recon,
                 pointer,
+                progress,
             },
             carry,
         ))
@@ -450,6 +486,7 @@ mod tests {
             instruction: tok.encode_batch(&texts, device),
             subgoal: Some(subgoal.into()),
             pointer_target: None,
+            progress: None,
         }
     }
 
@@ -620,6 +657,75 @@ mod tests {
         model.visit(&mut check);
         assert!(check.visited > 100, "visited only {}", check.visited);
         assert!(check.bad.is_empty(), "no gradient for {:?}", check.bad);
+    }
+
+    /// The progress head: built only with λ_prog > 0, its loss in the total with its weight,
+    /// its gradient reaching the memory (e_slotssm's SlotSSM; slotvla_h8's history padding
+    /// handled), and a batch without targets an error.
+    #[test]
+    fn progress_loss_reads_the_tokens_and_reaches_the_memory() {
+        let (_guard, device) = test_autodiff_device();
+        device.seed(4);
+        let (b, t) = (2, 4);
+        let plain = micro("e_slotssm");
+        let model = PolicyModel::new(&plain, &device).unwrap();
+        assert!(model.progress.is_none());
+        let (out, losses) = model.forward(&batch(&plain, b, t, &device)).unwrap();
+        assert!(out.progress.is_none() && losses.progress.is_none());
+        for name in ["e_slotssm", "slotvla_h8"] {
+            let mut cfg = micro(name);
+            cfg.loss.progress = 0.5;
+            let model = PolicyModel::new(&cfg, &device).unwrap();
+            let mut x = batch(&cfg, b, t, &device);
+            assert!(
+                model
+                    .forward(&x)
+                    .unwrap_err()
+                    .to_string()
+                    .contains("no progress targets"),
+                "{name}"
+            );
+            x.progress = Some(Tensor::from_ints([[0, 0, 1, 1], [2, 2, 2, 3]], &device));
+            let (out, losses) = model.forward(&x).unwrap();
+            assert_eq!(
+                out.progress.as_ref().map(|p| p.dims()),
+                Some([b, t, crate::heads::PROGRESS_CLASSES]),
+                "{name}"
+            );
+            let prog = scalar(losses.progress.clone().expect("L_prog"));
+            assert!(prog.is_finite() && prog > 0.0, "{name}: {prog}");
+            let mut want = scalar(losses.action.clone()) + 0.5 * prog;
+            for (l, w) in [
+                (&losses.contrastive, cfg.loss.contrastive),
+                (&losses.window, cfg.loss.window),
+                (&losses.slot_recon, cfg.loss.slot_recon),
+            ] {
+                if let Some(l) = l {
+                    want += w as f32 * scalar(l.clone());
+                }
+            }
+            let total = scalar(losses.total.clone());
+            assert!((total - want).abs() < 1e-4, "{name}: {total} vs {want}");
+            // L_prog alone moves the layers below the tokens, the memory among them.
+            let grads = losses.progress.unwrap().backward();
+            let mut check = GradCheck {
+                grads: &grads,
+                path: Vec::new(),
+                visited: 0,
+                bad: Vec::new(),
+            };
+            model.visit(&mut check);
+            let moved = |part: &str| !check.bad.iter().any(|p| p.contains(part));
+            assert!(moved("progress"), "{name}: {:?}", check.bad);
+            if name == "e_slotssm" {
+                assert!(moved("slot_ssm"), "{name}: {:?}", check.bad);
+            }
+            // Nothing above the tokens: the action decoder gets no gradient from it.
+            assert!(
+                check.bad.iter().any(|p| p.starts_with("decoder")),
+                "{name}: the decoder moved"
+            );
+        }
     }
 
     #[test]
@@ -848,6 +954,7 @@ mod tests {
             instruction: x.instruction.clone().narrow(0, 2 * i, 2),
             subgoal: None,
             pointer_target: None,
+            progress: None,
         };
         let whole = WindowBatch {
             subgoal: None,

@@ -265,6 +265,10 @@ pub struct LossWeights {
     /// (state mode with `model.overrides.decoder.pointer`; default 0).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub pointer: Option<f64>,
+    /// λ_prog: a head's cross-entropy to the number of subgoals done, read off each frame's
+    /// visual tokens (training only: the policy never observes it; needs `/goal`; default 0).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub progress: Option<f64>,
 }
 
 /// `[train]`: optimisation, schedule, checkpoints, validation.
@@ -545,6 +549,7 @@ impl Config {
             ("slot_recon", w.slot_recon),
             ("gripper", w.gripper),
             ("pointer", w.pointer),
+            ("progress", w.progress),
         ] {
             if let Some(v) = v
                 && !finite_nonneg(v)
@@ -635,6 +640,9 @@ impl Config {
         }
         if let Some(v) = w.pointer {
             cfg.loss.pointer = v;
+        }
+        if let Some(v) = w.progress {
+            cfg.loss.progress = v;
         }
         cfg.text.vocab = vocab;
         if cfg.loss.pointer > 0.0 && !cfg.decoder.pointer {
@@ -945,6 +953,24 @@ variant = "e_slotssm"
         assert!(
             e.to_string()
                 .contains("train.loss_weights.pointer: needs the pointer head"),
+            "{e}"
+        );
+        // The progress loss: any variant and observation, written only when set, a finite
+        // number ≥ 0, and it reaches the model config (which then builds the head).
+        let c = Config::load_with(&p, &sets(&["train.loss_weights.progress=0.5"])).unwrap();
+        assert!(c.to_toml().contains("progress = 0.5"));
+        let m = c.model_config(vec!["bowl".into()]).unwrap();
+        assert_eq!(m.loss.progress, 0.5);
+        let c = Config::load_with(&p, &sets(&[])).unwrap();
+        assert!(!c.to_toml().contains("progress"));
+        assert_eq!(
+            c.model_config(vec!["bowl".into()]).unwrap().loss.progress,
+            0.0
+        );
+        let e = Config::load_with(&p, &sets(&["train.loss_weights.progress=-1"])).unwrap_err();
+        assert!(
+            e.to_string()
+                .contains("train.loss_weights.progress: must be a finite number ≥ 0"),
             "{e}"
         );
         let bad = "train.loss_weights.pointer=-1";

@@ -32,6 +32,9 @@ pub struct Record {
     /// L_ptr (with the pointer head and λ_ptr > 0).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub pointer: Option<f64>,
+    /// L_prog (with λ_prog > 0).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub progress: Option<f64>,
     /// Global gradient norm before clipping.
     #[serde(default)]
     pub grad_norm: f64,
@@ -65,6 +68,7 @@ impl Record {
             ("window", self.window),
             ("slot_recon", self.slot_recon),
             ("pointer", self.pointer),
+            ("progress", self.progress),
         ] {
             if let Some(x) = x {
                 v.push((n, x));

@@ -76,6 +76,7 @@ pub fn mean_record(mut recs: Vec<(Record, f64)>) -> Record {
     out.window = opt(&|r| r.window);
     out.slot_recon = opt(&|r| r.slot_recon);
     out.pointer = opt(&|r| r.pointer);
+    out.progress = opt(&|r| r.progress);
     for (r, _) in &recs {
         out.forward_s = out.forward_s.max(r.forward_s);
         out.backward_s = out.backward_s.max(r.backward_s);

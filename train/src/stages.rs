@@ -36,7 +36,7 @@ pub struct Stage {
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub steps: Option<u64>,
     /// Loss terms summed (with their λ) into this stage's total: `action`, `contrastive`,
-    /// `window`, `slot_recon`, `pointer`.
+    /// `window`, `slot_recon`, `pointer`, `progress`.
     pub losses: Vec<String>,
     /// Model parts whose weights stay fixed, by module name anywhere in the model tree
     /// (`encoder`, `slot_attention`, `slot_ssm`, `window_head`, `fusion`, `relation`,
@@ -46,7 +46,14 @@ pub struct Stage {
 }
 
 /// Loss terms a stage may switch on.
-pub const LOSSES: [&str; 5] = ["action", "contrastive", "window", "slot_recon", "pointer"];
+pub const LOSSES: [&str; 6] = [
+    "action",
+    "contrastive",
+    "window",
+    "slot_recon",
+    "pointer",
+    "progress",
+];
 
 /// The stage of step `step` (steps done so far, 0-based): stages follow each other for their
 /// `steps`; the last one runs to the end. `None` without stages.
@@ -77,6 +84,7 @@ pub fn total(stage: &Stage, losses: &Losses, weights: &LossConfig) -> Option<Ten
             "window" => (losses.window.as_ref(), weights.window),
             "slot_recon" => (losses.slot_recon.as_ref(), weights.slot_recon),
             "pointer" => (losses.pointer.as_ref(), weights.pointer),
+            "progress" => (losses.progress.as_ref(), weights.progress),
             _ => (None, 0.0),
         };
         if let Some(t) = term {

@@ -128,6 +128,7 @@ fn record(step: u64, l: &Losses) -> Result<Record> {
         window: opt(&l.window)?,
         slot_recon: opt(&l.slot_recon)?,
         pointer: opt(&l.pointer)?,
+        progress: opt(&l.progress)?,
         grad_norm: 0.0,
         time_s: 0.0,
         data_s: 0.0,
@@ -186,6 +187,7 @@ pub fn validate(
                 window: r.window.map(|x| w * x),
                 slot_recon: r.slot_recon.map(|x| w * x),
                 pointer: r.pointer.map(|x| w * x),
+                progress: r.progress.map(|x| w * x),
                 ..r
             },
             Some(s) => Record {
@@ -195,6 +197,7 @@ pub fn validate(
                 window: add(s.window, r.window),
                 slot_recon: add(s.slot_recon, r.slot_recon),
                 pointer: add(s.pointer, r.pointer),
+                progress: add(s.progress, r.progress),
                 ..s
             },
         });
@@ -207,6 +210,7 @@ pub fn validate(
         window: s.window.map(|x| x / batches),
         slot_recon: s.slot_recon.map(|x| x / batches),
         pointer: s.pointer.map(|x| x / batches),
+        progress: s.progress.map(|x| x / batches),
         ..s
     }))
 }
@@ -259,7 +263,7 @@ pub fn open_data(cfg: &Config) -> Result<(ModelConfig, RunData)> {
     let opened = data::OpenedDataset::open(&cfg.data.dir)?;
     let vocab = RunData::model_vocab(&opened.index)?;
     let mut mcfg: ModelConfig = cfg.model_config(vocab).map_err(|m| config_error(cfg, m))?;
-    if mcfg.variant.needs_subgoal_text() {
+    if mcfg.variant.needs_subgoal_text() || mcfg.loss.progress > 0.0 {
         crate::dataset::check_goals(&opened)?;
     }
     let state = match cfg.model.obs {

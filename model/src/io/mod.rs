@@ -590,6 +590,16 @@ impl Processor {
                 )
             }
         };
+        // Subgoals done per frame (as observed), the progress head's targets, clamped to its
+        // last class; windows without goal progress leave them out.
+        let top = (crate::heads::PROGRESS_CLASSES - 1) as u32;
+        let progress = samples.iter().all(|s| s.goals.len() >= t).then(|| {
+            let done: Vec<i64> = samples
+                .iter()
+                .flat_map(|s| s.goals[..t].iter().map(|g| i64::from(g.satisfied.min(top))))
+                .collect();
+            Tensor::from_data(TensorData::new(done, [b, t]), device)
+        });
         Ok(WindowBatch {
             obs,
             actions: Tensor::from_data(TensorData::new(actions, [b, t, ha, 7]), device),
@@ -601,6 +611,7 @@ impl Processor {
             instruction: self.tokenizer.encode_batch(&instructions, device),
             subgoal,
             pointer_target,
+            progress,
         })
     }
 
