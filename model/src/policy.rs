@@ -767,20 +767,58 @@ mod tests {
         let subgoal =
             tok.encode_batch(&sub_texts, &device)
                 .reshape([1, frames, 1, cfg.text.max_len]);
-        let full = model
+        let out = model
             .predict(images.clone(), instr.clone(), Some(subgoal.clone().into()))
-            .unwrap()
-            .actions;
+            .unwrap();
+        let full = out.actions;
+        // The progress head's distribution per frame `[T, C]` (models with the head).
+        let progress = out.progress.map(|p| {
+            let c = p.dims()[2];
+            burn::tensor::activation::softmax(p.reshape([frames, c]), 1)
+        });
         let mut policy = StreamingPolicy::new(model, &device).unwrap();
+        assert!(policy.last_progress().is_none());
         let mut worst = 0.0f32;
+        let mut worst_progress = 0.0f32;
         for t in 0..frames {
             let img = images.clone().narrow(1, t, 1).squeeze_dim::<4>(1);
             let sg = subgoal.clone().narrow(1, t, 1).squeeze_dim::<3>(1);
             let chunk = policy.act_tensor(img, instr.clone(), Some(sg)).unwrap();
             let want = full.clone().narrow(1, t, 1).reshape(chunk.dims());
             worst = worst.max((chunk - want).abs().max().into_scalar::<f32>());
+            match (&progress, policy.last_progress()) {
+                (Some(p), Some(got)) => {
+                    let want = p
+                        .clone()
+                        .narrow(0, t, 1)
+                        .into_data()
+                        .to_vec::<f32>()
+                        .unwrap();
+                    for (a, b) in got.iter().zip(&want) {
+                        worst_progress = worst_progress.max((a - b).abs());
+                    }
+                }
+                (None, None) => {}
+                _ => panic!("the window forward and the stream disagree on the progress head"),
+            }
         }
         assert!(worst < 1e-4, "{}: max diff {worst}", cfg.variant.name());
+        assert!(
+            worst_progress < 1e-4,
+            "{}: progress max diff {worst_progress}",
+            cfg.variant.name()
+        );
+    }
+
+    /// The progress head read while streaming equals the window forward's, frame by frame
+    /// (e_slotssm's memory; slotvla_h3's history of frames seen).
+    #[test]
+    fn streamed_progress_equals_the_window_forward() {
+        for name in ["e_slotssm", "slotvla_h3"] {
+            let mut cfg = micro(name);
+            cfg.loss.progress = 0.5;
+            streaming_equals_window(cfg, 12);
+        }
     }
 
     /// Per-object labels and boxes of `frames` frames of 2 objects (object 1 unseen in every

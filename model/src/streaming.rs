@@ -19,6 +19,9 @@ struct StreamState {
     step: usize,
     /// The variant's memory (slots, SSM state, history tokens).
     memory: Memory,
+    /// The progress head's distribution over the subgoals done at the latest frame (models
+    /// trained with the progress loss).
+    progress: Option<Vec<f32>>,
 }
 
 /// A policy used step by step; its state lives inside and is reset per episode.
@@ -73,6 +76,14 @@ impl StreamingPolicy {
         let [_, k, n] = m.dims();
         let v = m.clone().into_data().try_to_vec::<f32>().ok()?;
         Some((0..k).map(|i| v[i * n..(i + 1) * n].to_vec()).collect())
+    }
+
+    /// What the progress head (models trained with `loss.progress` > 0) reads off the latest
+    /// frame's tokens: its probability of each number of subgoals done, `[C]`; `None` before the
+    /// first step or without the head. A diagnostic of what the memory keeps; actions do not
+    /// depend on it.
+    pub fn last_progress(&self) -> Option<&[f32]> {
+        self.state.progress.as_deref()
     }
 
     /// Floats held in the carried state now (slots + SSM states + history tokens).
@@ -176,6 +187,16 @@ impl StreamingPolicy {
         let visual = m
             .tokens
             .step(feats, subgoal, &mut self.state.memory, shared)?;
+        if let Some(head) = &m.progress {
+            // As in training, over this frame's tokens (a streamed history holds only frames
+            // seen, so nothing is padding).
+            let p = burn::tensor::activation::softmax(head.forward(visual.clone(), None), 1);
+            self.state.progress = Some(
+                p.into_data()
+                    .try_to_vec::<f32>()
+                    .map_err(|e| ModelError::Input(format!("progress head: {e:?}")))?,
+            );
+        }
         self.state.step += 1;
         Ok(visual)
     }
