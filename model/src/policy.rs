@@ -792,7 +792,7 @@ mod tests {
                         .clone()
                         .narrow(0, t, 1)
                         .into_data()
-                        .to_vec::<f32>()
+                        .try_to_vec::<f32>()
                         .unwrap();
                     for (a, b) in got.iter().zip(&want) {
                         worst_progress = worst_progress.max((a - b).abs());
