@@ -490,6 +490,18 @@ mod tests {
         }
     }
 
+    /// λ_tc L_tc + λ_win L_win + λ_sa L_sa of the terms the variant computes.
+    fn slot_terms(losses: &Losses, cfg: &ModelConfig) -> f32 {
+        [
+            (&losses.contrastive, cfg.loss.contrastive),
+            (&losses.window, cfg.loss.window),
+            (&losses.slot_recon, cfg.loss.slot_recon),
+        ]
+        .into_iter()
+        .filter_map(|(l, w)| l.as_ref().map(|l| w as f32 * scalar(l.clone())))
+        .sum()
+    }
+
     fn scalar(x: Tensor<1>) -> f32 {
         x.into_scalar::<f32>()
     }
@@ -530,16 +542,7 @@ mod tests {
             assert_eq!(losses.contrastive.is_some(), slots, "{name}");
             assert_eq!(losses.slot_recon.is_some(), slots, "{name}");
             assert_eq!(losses.window.is_some(), ssm, "{name}");
-            let mut want = scalar(losses.action.clone());
-            for (l, w) in [
-                (&losses.contrastive, cfg.loss.contrastive),
-                (&losses.window, cfg.loss.window),
-                (&losses.slot_recon, cfg.loss.slot_recon),
-            ] {
-                if let Some(l) = l {
-                    want += w as f32 * scalar(l.clone());
-                }
-            }
+            let want = scalar(losses.action.clone()) + slot_terms(&losses, &cfg);
             let total = scalar(losses.total);
             assert!(total.is_finite() && (total - want).abs() < 1e-4, "{name}");
         }
@@ -577,6 +580,20 @@ mod tests {
         bad: Vec<String>,
     }
 
+    impl<'a> GradCheck<'a> {
+        /// Visits every parameter of `model` against `grads`.
+        fn run(model: &PolicyModel, grads: &'a Gradients) -> Self {
+            let mut check = GradCheck {
+                grads,
+                path: Vec::new(),
+                visited: 0,
+                bad: Vec::new(),
+            };
+            model.visit(&mut check);
+            check
+        }
+    }
+
     impl ModuleVisitor for GradCheck<'_> {
         fn enter_module(&mut self, name: &str, _container_type: &str) {
             self.path.push(name.to_string());
@@ -607,13 +624,7 @@ mod tests {
         let model = PolicyModel::new(&cfg, &device).unwrap();
         let (_, losses) = model.forward(&batch(&cfg, 2, 4, &device)).unwrap();
         let grads = losses.total.backward();
-        let mut check = GradCheck {
-            grads: &grads,
-            path: Vec::new(),
-            visited: 0,
-            bad: Vec::new(),
-        };
-        model.visit(&mut check);
+        let check = GradCheck::run(&model, &grads);
         assert!(check.visited > 50, "{name}: visited only {}", check.visited);
         // Every word of the batch is used, but the vocabulary also holds special ids and
         // words absent from this batch: embedding rows are one parameter, so it still counts.
@@ -648,13 +659,7 @@ mod tests {
         let total = scalar(losses.total.clone());
         assert!(total.is_finite() && total > 0.0, "loss {total}");
         let grads = losses.total.backward();
-        let mut check = GradCheck {
-            grads: &grads,
-            path: Vec::new(),
-            visited: 0,
-            bad: Vec::new(),
-        };
-        model.visit(&mut check);
+        let check = GradCheck::run(&model, &grads);
         assert!(check.visited > 100, "visited only {}", check.visited);
         assert!(check.bad.is_empty(), "no gradient for {:?}", check.bad);
     }
@@ -694,27 +699,12 @@ mod tests {
             );
             let prog = scalar(losses.progress.clone().expect("L_prog"));
             assert!(prog.is_finite() && prog > 0.0, "{name}: {prog}");
-            let mut want = scalar(losses.action.clone()) + 0.5 * prog;
-            for (l, w) in [
-                (&losses.contrastive, cfg.loss.contrastive),
-                (&losses.window, cfg.loss.window),
-                (&losses.slot_recon, cfg.loss.slot_recon),
-            ] {
-                if let Some(l) = l {
-                    want += w as f32 * scalar(l.clone());
-                }
-            }
+            let want = scalar(losses.action.clone()) + 0.5 * prog + slot_terms(&losses, &cfg);
             let total = scalar(losses.total.clone());
             assert!((total - want).abs() < 1e-4, "{name}: {total} vs {want}");
             // L_prog alone moves the layers below the tokens, the memory among them.
             let grads = losses.progress.unwrap().backward();
-            let mut check = GradCheck {
-                grads: &grads,
-                path: Vec::new(),
-                visited: 0,
-                bad: Vec::new(),
-            };
-            model.visit(&mut check);
+            let check = GradCheck::run(&model, &grads);
             let moved = |part: &str| !check.bad.iter().any(|p| p.contains(part));
             assert!(moved("progress"), "{name}: {:?}", check.bad);
             if name == "e_slotssm" {
