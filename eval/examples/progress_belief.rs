@@ -46,7 +46,7 @@ fn main() -> anyhow::Result<()> {
         for t in 0..task.max_steps {
             let done = obs.goal.as_ref().map_or(0, |g| g.satisfied);
             let a = policy.act(&env, &obs)?;
-            let Some((belief, p)) = policy.progress_belief() else {
+            let Some((belief, p)) = policy.progress_belief()? else {
                 bail!("{run}: the model has no progress head (trained without the progress loss)");
             };
             if done != last_done {

@@ -308,12 +308,11 @@ impl ModelPolicy {
     /// The number of subgoals done that the progress head reads off the latest frame (its most
     /// probable class) with that probability; `None` before the first step or for a model
     /// trained without the progress loss.
-    pub fn progress_belief(&self) -> Option<(usize, f32)> {
-        let p = self.policy.last_progress()?;
-        p.iter()
-            .copied()
-            .enumerate()
-            .max_by(|a, b| a.1.total_cmp(&b.1))
+    pub fn progress_belief(&self) -> Result<Option<(usize, f32)>, EvalError> {
+        Ok(self
+            .policy
+            .last_progress()?
+            .and_then(|p| p.into_iter().enumerate().max_by(|a, b| a.1.total_cmp(&b.1))))
     }
 
     /// Whether the oracle subgoal is fed to the model.

@@ -767,7 +767,7 @@ mod tests {
             burn::tensor::activation::softmax(p.reshape([frames, c]), 1)
         });
         let mut policy = StreamingPolicy::new(model, &device).unwrap();
-        assert!(policy.last_progress().is_none());
+        assert!(policy.last_progress().unwrap().is_none());
         let mut worst = 0.0f32;
         let mut worst_progress = 0.0f32;
         for t in 0..frames {
@@ -776,7 +776,7 @@ mod tests {
             let chunk = policy.act_tensor(img, instr.clone(), Some(sg)).unwrap();
             let want = full.clone().narrow(1, t, 1).reshape(chunk.dims());
             worst = worst.max((chunk - want).abs().max().into_scalar::<f32>());
-            match (&progress, policy.last_progress()) {
+            match (&progress, policy.last_progress().unwrap()) {
                 (Some(p), Some(got)) => {
                     let want = p
                         .clone()

@@ -19,9 +19,9 @@ struct StreamState {
     step: usize,
     /// The variant's memory (slots, SSM state, history tokens).
     memory: Memory,
-    /// The progress head's distribution over the subgoals done at the latest frame (models
-    /// trained with the progress loss).
-    progress: Option<Vec<f32>>,
+    /// The latest frame's visual tokens `[1, V, D_dec]`, kept for the progress head (models
+    /// trained with the progress loss; read on demand, off the step's path).
+    last_tokens: Option<Tensor<3>>,
 }
 
 /// A policy used step by step; its state lives inside and is reset per episode.
@@ -82,8 +82,17 @@ impl StreamingPolicy {
     /// frame's tokens: its probability of each number of subgoals done, `[C]`; `None` before the
     /// first step or without the head. A diagnostic of what the memory keeps; actions do not
     /// depend on it.
-    pub fn last_progress(&self) -> Option<&[f32]> {
-        self.state.progress.as_deref()
+    pub fn last_progress(&self) -> Result<Option<Vec<f32>>> {
+        let (Some(head), Some(tokens)) = (&self.model.progress, &self.state.last_tokens) else {
+            return Ok(None);
+        };
+        // As in training, over the frame's tokens (a streamed history holds only frames seen,
+        // so nothing is padding).
+        burn::tensor::activation::softmax(head.forward(tokens.clone(), None), 1)
+            .into_data()
+            .try_to_vec::<f32>()
+            .map(Some)
+            .map_err(|e| ModelError::Input(format!("progress head: {e:?}")))
     }
 
     /// Floats held in the carried state now (slots + SSM states + history tokens).
@@ -187,15 +196,8 @@ impl StreamingPolicy {
         let visual = m
             .tokens
             .step(feats, subgoal, &mut self.state.memory, shared)?;
-        if let Some(head) = &m.progress {
-            // As in training, over this frame's tokens (a streamed history holds only frames
-            // seen, so nothing is padding).
-            let p = burn::tensor::activation::softmax(head.forward(visual.clone(), None), 1);
-            self.state.progress = Some(
-                p.into_data()
-                    .try_to_vec::<f32>()
-                    .map_err(|e| ModelError::Input(format!("progress head: {e:?}")))?,
-            );
+        if m.progress.is_some() {
+            self.state.last_tokens = Some(visual.clone());
         }
         self.state.step += 1;
         Ok(visual)
