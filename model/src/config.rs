@@ -243,6 +243,9 @@ pub struct RelationConfig {
 pub enum ActionHead {
     /// Continuous chunk, L1 loss (OpenVLA-OFT).
     L1,
+    /// The L1 head's continuous chunk with a squared-error loss: a few large errors (the
+    /// reach's first steps) outweigh many small ones, where L1 settles on their median.
+    L2,
     /// 256-bin classification per dimension, cross-entropy (OpenVLA).
     Bins,
 }
@@ -693,11 +696,11 @@ impl ModelConfig {
         // (Its observation, state, is checked where the model is built: configs are validated
         // before the dataset tells their observation.)
         if self.decoder.pointer
-            && (self.decoder.head != ActionHead::L1 || self.decoder.queries != QueryLayout::Step)
+            && (self.decoder.head == ActionHead::Bins || self.decoder.queries != QueryLayout::Step)
         {
             return err(
-                "decoder.pointer needs the L1 head (decoder.head = \"l1\") and step queries \
-                 (decoder.queries = \"step\")"
+                "decoder.pointer needs a continuous head (decoder.head = \"l1\" or \"l2\") and step \
+                 queries (decoder.queries = \"step\")"
                     .into(),
             );
         }

@@ -224,7 +224,7 @@ impl ActionDecoder {
                 })
                 .collect(),
             norm: layer_norm(w, device),
-            l1: (config.head == ActionHead::L1).then(|| L1Head {
+            l1: (config.head != ActionHead::Bins).then(|| L1Head {
                 input: LinearConfig::new(if step { w } else { a * w }, w).init(device),
                 blocks: (0..2)
                     .map(|_| ResBlock {

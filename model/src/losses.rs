@@ -22,6 +22,17 @@ pub fn action_l1(pred: Tensor<4>, target: Tensor<4>, mask: Tensor<4>) -> Tensor<
     masked_mean((pred - target).abs(), mask)
 }
 
+/// Action loss, squared error over the chunk: mean (â − a*)² over the entries where `mask` = 1.
+///
+/// # Shapes
+/// - pred, target, mask: `[B, T, H_a, A]` → `[1]`
+pub fn action_l2(pred: Tensor<4>, target: Tensor<4>, mask: Tensor<4>) -> Tensor<1> {
+    let [b, t, h, a] = pred.dims();
+    assert_shape!(target, [b, t, h, a]);
+    assert_shape!(mask, [b, t, h, a]);
+    masked_mean((pred - target).powi_scalar(2), mask)
+}
+
 /// The action mask with the gripper column (the last of A) weighted by `gripper`, the others by 1.
 ///
 /// # Shapes
@@ -241,6 +252,18 @@ mod tests {
         assert!((scalar(action_l1(pred.clone(), target.clone(), all)) - 3.0).abs() < 1e-6);
         let some = Tensor::<4>::from_floats([[[[1.0, 0.0], [1.0, 0.0]]]], &device);
         assert!((scalar(action_l1(pred, target, some)) - 2.0).abs() < 1e-6);
+    }
+
+    #[test]
+    fn action_l2_is_the_masked_mean_squared_error() {
+        let (_guard, device) = test_device();
+        let pred = Tensor::<4>::from_floats([[[[1.0, 2.0], [3.0, 4.0]]]], &device);
+        let target = Tensor::<4>::from_floats([[[[0.0, 0.0], [0.0, 10.0]]]], &device);
+        let all = Tensor::<4>::ones([1, 1, 2, 2], &device);
+        // (1 + 4 + 9 + 36) / 4.
+        assert!((scalar(action_l2(pred.clone(), target.clone(), all)) - 12.5).abs() < 1e-5);
+        let some = Tensor::<4>::from_floats([[[[1.0, 0.0], [1.0, 0.0]]]], &device);
+        assert!((scalar(action_l2(pred, target, some)) - 5.0).abs() < 1e-5);
     }
 
     #[test]

@@ -341,6 +341,9 @@ impl PolicyModel {
             (ActionHead::Bins, Some(logits)) => {
                 losses::action_ce(logits.clone(), batch.actions.clone(), action_mask)
             }
+            (ActionHead::L2, _) => {
+                losses::action_l2(out.actions.clone(), batch.actions.clone(), action_mask)
+            }
             _ => losses::action_l1(out.actions.clone(), batch.actions.clone(), action_mask),
         };
         let mut total = action.clone().mul_scalar(cfg.loss.action);
@@ -554,6 +557,32 @@ mod tests {
         assert_eq!(out.logits.unwrap().dims(), [b, t, 4, 7, 256]);
         // Near-uniform logits at init: CE ≈ ln 256.
         assert!((scalar(losses.action) - 256f32.ln()).abs() < 1.0);
+        // The squared-error head: the L1 head's outputs (same weights, same actions), its loss
+        // the masked mean squared error of them.
+        let l1 = tiny("slotvla_h1");
+        let mut l2 = l1.clone();
+        l2.decoder.head = ActionHead::L2;
+        let model_l1 = PolicyModel::new(&l1, &device).unwrap();
+        let model_l2 = PolicyModel::new(&l2, &device)
+            .unwrap()
+            .load_record(model_l1.clone().into_record());
+        let x = batch(&l1, b, t, &device);
+        let (out1, loss1) = model_l1.forward(&x).unwrap();
+        let (out2, loss2) = model_l2.forward(&x).unwrap();
+        assert_eq!(out1.actions.to_data(), out2.actions.to_data());
+        let mask = model_l2.action_mask(&x);
+        let want = scalar(losses::action_l2(
+            out2.actions,
+            x.actions.clone(),
+            mask.clone(),
+        ));
+        assert!((scalar(loss2.action.clone()) - want).abs() < 1e-6);
+        let l1_loss = scalar(losses::action_l1(out1.actions, x.actions.clone(), mask));
+        assert!((scalar(loss1.action) - l1_loss).abs() < 1e-6);
+        assert!(
+            (scalar(loss2.action) - l1_loss).abs() > 1e-3,
+            "the two losses differ"
+        );
     }
 
     #[test]
@@ -1394,7 +1423,7 @@ mod tests {
         bins.decoder.head = ActionHead::Bins;
         for bad in [value, bins] {
             let e = bad.validate().unwrap_err().to_string();
-            assert!(e.contains("decoder.pointer needs the L1 head"), "{e}");
+            assert!(e.contains("decoder.pointer needs a continuous head"), "{e}");
         }
         // Configs written before it read as without.
         let mut json = serde_json::to_value(&ok.decoder).unwrap();

@@ -942,7 +942,8 @@ variant = "e_slotssm"
         );
         let e = Config::load_with(&p, &sets(&["model.obs=state", ptr])).unwrap_err();
         assert!(
-            e.to_string().contains("decoder.pointer needs the L1 head"),
+            e.to_string()
+                .contains("decoder.pointer needs a continuous head"),
             "{e}"
         );
         // Its loss weight: with the head only, and a finite number ≥ 0.
