@@ -650,6 +650,24 @@ pub const COUNTING_TASKS: [&str; 4] = [
 /// task for the memory claim to hold.
 pub const CLAIM_MARGIN: f64 = 30.0;
 
+/// A variant's result on one task, averaged over its training seeds.
+struct Seeded {
+    /// Mean subgoal completion, percent.
+    completion: f64,
+    /// Mean success, percent.
+    success: f64,
+    /// Training seeds averaged.
+    seeds: usize,
+}
+
+/// A run tag without its trailing `+seedN` (a replicate at another `train.seed`).
+fn strip_seed(tag: &str) -> &str {
+    match tag.rsplit_once("+seed") {
+        Some((base, n)) if !n.is_empty() && n.bytes().all(|b| b.is_ascii_digit()) => base,
+        _ => tag,
+    }
+}
+
 /// The run-tag suffixes under which a memory claim can be compared: `""` (untagged runs) and every
 /// tag other than the `windows` ablation that some e_slotssm or slotvla_h1 run carries (`"+plain"`
 /// for `e_slotssm+plain`), in first-seen order.
@@ -659,6 +677,11 @@ fn recipes(by_variant: &[(&str, Vec<&TaskSummary>)]) -> Vec<String> {
         let Some((base, tag)) = label.split_once('+') else {
             continue;
         };
+        // `+seedN` runs are replicates of their recipe, not a recipe of their own.
+        let tag = strip_seed(tag);
+        if tag.is_empty() || tag.starts_with("seed") {
+            continue;
+        }
         if matches!(base, "e_slotssm" | "slotvla_h1")
             && !tag.starts_with("windows")
             && !out.iter().any(|r| r.strip_prefix('+') == Some(tag))
@@ -678,12 +701,26 @@ fn recipes(by_variant: &[(&str, Vec<&TaskSummary>)]) -> Vec<String> {
 /// `recipe` is a run tag suffix (`""` or e.g. `"+plain"`): the comparison is then between the runs
 /// of that tag (the same data and training recipe on both sides).
 fn memory_claim(mode: &str, by_variant: &[(&str, Vec<&TaskSummary>)], recipe: &str) -> String {
-    let find = |variant: &str, task: &str| -> Option<&TaskSummary> {
+    // A variant's completion and success on a task, the mean over its training seeds (the run
+    // of the label and its `+seedN` replicates), with their number.
+    let find = |variant: &str, task: &str| -> Option<Seeded> {
         let label = format!("{variant}{recipe}");
-        by_variant
+        let rows: Vec<&TaskSummary> = by_variant
             .iter()
-            .find(|(v, _)| *v == label)
-            .and_then(|(_, rows)| rows.iter().find(|t| t.task == task).copied())
+            .filter(|(v, _)| {
+                *v == label
+                    || v.strip_prefix(label.as_str())
+                        .and_then(|rest| rest.strip_prefix("+seed"))
+                        .is_some_and(|n| !n.is_empty() && n.bytes().all(|b| b.is_ascii_digit()))
+            })
+            .filter_map(|(_, rows)| rows.iter().find(|t| t.task == task).copied())
+            .collect();
+        let n = rows.len();
+        (n > 0).then(|| Seeded {
+            completion: rows.iter().map(|t| t.completion).sum::<f64>() / n as f64,
+            success: rows.iter().map(|t| t.success).sum::<f64>() / n as f64,
+            seeds: n,
+        })
     };
     let measured: Vec<&str> = COUNTING_TASKS
         .into_iter()
@@ -751,6 +788,28 @@ fn memory_claim(mode: &str, by_variant: &[(&str, Vec<&TaskSummary>)], recipe: &s
             .iter()
             .fold((0.0, 0.0), |(c, s), (dc, ds)| (c + dc / n, s + ds / n));
         s.push_str(&format!(" **{mc:+.1}** ({ms:+.1}) |\n"));
+    }
+    let replicated: Vec<String> = [
+        "e_slotssm",
+        "slotvla_h1",
+        "e_slotssm+windows",
+        "e_slotssm_oracle",
+    ]
+    .into_iter()
+    .flat_map(|v| {
+        measured.iter().filter_map(move |t| {
+            find(v, t)
+                .filter(|x| x.seeds > 1)
+                .map(|x| format!("{v}{r} on {} ({} seeds)", report::short(t), x.seeds))
+        })
+    })
+    .collect();
+    if !replicated.is_empty() {
+        s.push_str(&format!(
+            "\nA variant trained at several `train.seed`s (`+seedN` rows) enters with its mean over \
+             them: {}.\n",
+            replicated.join(", ")
+        ));
     }
     let missing: Vec<&str> = COUNTING_TASKS
         .into_iter()
@@ -1137,6 +1196,37 @@ mod tests {
         // Without slotvla_h1 there is no claim to measure.
         runs.remove(2);
         assert!(!markdown(&x, &runs, &[]).contains("memory claim"));
+    }
+
+    /// Replicates at other training seeds (`+seedN`) enter the claim with their recipe's run,
+    /// averaged; they are not a recipe of their own.
+    #[test]
+    fn memory_claim_averages_the_training_seeds() {
+        let x = experiment();
+        let t3 = "libero_mem/t3";
+        let runs = vec![
+            state_run("e_slotssm+hold", vec![row(t3, 70.0, 40.0)]),
+            state_run("e_slotssm+hold+seed1", vec![row(t3, 10.0, 0.0)]),
+            state_run("e_slotssm+hold+seed2", vec![row(t3, 10.0, 20.0)]),
+            state_run("slotvla_h1+hold", vec![row(t3, 0.0, 0.0)]),
+        ];
+        let md = markdown(&x, &runs, &[]);
+        assert_eq!(
+            md.matches("the memory claim on the counting tasks").count(),
+            1,
+            "{md}"
+        );
+        let hold = md
+            .split("the memory claim on the counting tasks (+hold runs)")
+            .nth(1)
+            .expect("a section of the +hold runs");
+        assert!(
+            hold.contains("| e_slotssm+hold − slotvla_h1+hold (the claim) | +30 (+20) |"),
+            "{hold}"
+        );
+        assert!(hold.contains("e_slotssm+hold on t3 (3 seeds)"), "{hold}");
+        assert_eq!(strip_seed("hold+seed12"), "hold");
+        assert_eq!(strip_seed("hold+seedling"), "hold+seedling");
     }
 
     /// Tagged runs (another data recipe on both sides) get their own claim section, compared
