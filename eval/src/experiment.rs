@@ -674,14 +674,10 @@ fn strip_seed(tag: &str) -> &str {
 fn recipes(by_variant: &[(&str, Vec<&TaskSummary>)]) -> Vec<String> {
     let mut out = vec![String::new()];
     for (label, _) in by_variant {
-        let Some((base, tag)) = label.split_once('+') else {
+        // `+seedN` runs are replicates of their recipe, not a recipe of their own.
+        let Some((base, tag)) = strip_seed(label).split_once('+') else {
             continue;
         };
-        // `+seedN` runs are replicates of their recipe, not a recipe of their own.
-        let tag = strip_seed(tag);
-        if tag.is_empty() || tag.starts_with("seed") {
-            continue;
-        }
         if matches!(base, "e_slotssm" | "slotvla_h1")
             && !tag.starts_with("windows")
             && !out.iter().any(|r| r.strip_prefix('+') == Some(tag))
@@ -707,12 +703,7 @@ fn memory_claim(mode: &str, by_variant: &[(&str, Vec<&TaskSummary>)], recipe: &s
         let label = format!("{variant}{recipe}");
         let rows: Vec<&TaskSummary> = by_variant
             .iter()
-            .filter(|(v, _)| {
-                *v == label
-                    || v.strip_prefix(label.as_str())
-                        .and_then(|rest| rest.strip_prefix("+seed"))
-                        .is_some_and(|n| !n.is_empty() && n.bytes().all(|b| b.is_ascii_digit()))
-            })
+            .filter(|(v, _)| strip_seed(v) == label)
             .filter_map(|(_, rows)| rows.iter().find(|t| t.task == task).copied())
             .collect();
         let n = rows.len();
@@ -758,6 +749,15 @@ fn memory_claim(mode: &str, by_variant: &[(&str, Vec<&TaskSummary>)], recipe: &s
          claim: e_slotssm ≥ {CLAIM_MARGIN:.0} points above the memoryless slotvla_h1 with equal \
          inputs (no oracle label) on every counting task.\n\n"
     );
+    // Every variant the comparisons read, once each, in order.
+    let mut variants: Vec<&str> = vec![];
+    for (_, a, b) in &comparisons {
+        for v in [*a, *b] {
+            if !variants.contains(&v) {
+                variants.push(v);
+            }
+        }
+    }
     table_header(&mut s, "comparison", &measured);
     // The claim's own margins (every measured task has both sides), per task.
     let mut margins: Vec<f64> = vec![];
@@ -789,21 +789,16 @@ fn memory_claim(mode: &str, by_variant: &[(&str, Vec<&TaskSummary>)], recipe: &s
             .fold((0.0, 0.0), |(c, s), (dc, ds)| (c + dc / n, s + ds / n));
         s.push_str(&format!(" **{mc:+.1}** ({ms:+.1}) |\n"));
     }
-    let replicated: Vec<String> = [
-        "e_slotssm",
-        "slotvla_h1",
-        "e_slotssm+windows",
-        "e_slotssm_oracle",
-    ]
-    .into_iter()
-    .flat_map(|v| {
-        measured.iter().filter_map(move |t| {
-            find(v, t)
-                .filter(|x| x.seeds > 1)
-                .map(|x| format!("{v}{r} on {} ({} seeds)", report::short(t), x.seeds))
+    let replicated: Vec<String> = variants
+        .into_iter()
+        .flat_map(|v| {
+            measured.iter().filter_map(move |t| {
+                find(v, t)
+                    .filter(|x| x.seeds > 1)
+                    .map(|x| format!("{v}{r} on {} ({} seeds)", report::short(t), x.seeds))
+            })
         })
-    })
-    .collect();
+        .collect();
     if !replicated.is_empty() {
         s.push_str(&format!(
             "\nA variant trained at several `train.seed`s (`+seedN` rows) enters with its mean over \
