@@ -289,6 +289,13 @@ pub struct TrainSection {
     /// starts at step 0 together and, on demos of similar length, every batch holds the same
     /// phase). Measured better on state-mode T1 and worse on LIBERO-Goal (train/README.md).
     pub stagger: bool,
+    /// `episodes` sampling: each lane enters each episode at a seeded step in
+    /// `0..=start_jitter` with a cold memory, instead of at its first frame (0, the default), so
+    /// that the time since the memory started does not tell where the demo is (a policy whose
+    /// memory can tell the time may otherwise follow one path timed from the start instead of
+    /// reading the scene). The skipped steps are not fed.
+    #[serde(skip_serializing_if = "is_zero_steps")]
+    pub start_jitter: usize,
     /// Data-parallel replicas of the model (default 1): each step splits the batch into this
     /// many groups of consecutive lanes, runs each group's forward and backward on its own
     /// thread with its own copy of the weights, and sums their gradients, each replica's loss
@@ -337,6 +344,10 @@ pub struct TrainSection {
 
 pub use crate::stages::Stage;
 
+fn is_zero_steps(n: &usize) -> bool {
+    *n == 0
+}
+
 fn is_one(n: &usize) -> bool {
     *n == 1
 }
@@ -359,6 +370,7 @@ impl Default for TrainSection {
             batch_size: 8,
             sampling: Sampling::default(),
             stagger: false,
+            start_jitter: 0,
             replicas: 1,
             ema: None,
             lr: 3e-4,
@@ -477,6 +489,12 @@ impl Config {
             return Err(
                 "data.idle_tail_weight: weights the idle tail that `data.mask_idle_tail = true` \
                  sets apart; set that too"
+                    .into(),
+            );
+        }
+        if self.train.start_jitter > 0 && self.train.sampling != Sampling::Episodes {
+            return Err(
+                "train.start_jitter: jitters where lanes enter episodes, which only                  `train.sampling = \"episodes\"` has"
                     .into(),
             );
         }
@@ -1039,6 +1057,26 @@ variant = "e_slotssm"
                 "{bad}: {e}"
             );
         }
+        let c = Config::load_with(&p, &sets(&["train.start_jitter=30"])).unwrap();
+        assert_eq!(c.train.start_jitter, 30);
+        assert!(c.to_toml().contains("start_jitter = 30"));
+        assert!(
+            !Config::load_with(&p, &sets(&[]))
+                .unwrap()
+                .to_toml()
+                .contains("start_jitter")
+        );
+        let e = Config::load_with(
+            &p,
+            &sets(&["train.start_jitter=30", "train.sampling=\"windows\""]),
+        )
+        .unwrap_err();
+        assert!(
+            e.to_string()
+                .contains("train.start_jitter: jitters where lanes enter episodes")
+                && e.to_string().contains(&p.display().to_string()),
+            "{e}"
+        );
         let c = Config::load_with(&p, &sets(&["data.gripper_switch_weight=4"])).unwrap();
         assert_eq!(c.data.gripper_switch_weight, 4.0);
         assert!(c.to_toml().contains("gripper_switch_weight = 4.0"));

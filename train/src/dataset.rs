@@ -316,6 +316,14 @@ pub struct Lane {
     /// written before lanes were staggered.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub stop: Option<usize>,
+    /// Step at which the lane entered this episode (0 unless the sampler jitters starts: see
+    /// [`EpisodeSampler::start_jitter`]); the chunk starting there starts a cold memory.
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub first: usize,
+}
+
+fn is_zero(n: &usize) -> bool {
+    *n == 0
 }
 
 /// One chunk of a batch: which episode, from which step, and whether the lane starts the
@@ -355,6 +363,13 @@ pub struct EpisodeSampler {
     /// the option existed, whose lanes were all started already).
     #[serde(default)]
     pub stagger: bool,
+    /// `train.start_jitter`: a lane enters each episode at a seeded step in `0..=start_jitter`
+    /// (uniform, below the episode's length) with a cold memory, instead of at its first frame
+    /// (0, the default). Breaks the link between the time since the memory started and where the
+    /// demo is, so that a policy whose memory can tell the time cannot follow one path timed from
+    /// the start; the steps before the entry are skipped, never fed as padding.
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub start_jitter: usize,
 }
 
 /// Seed of lane `lane`'s first stop, from the sampler's seed.
@@ -369,7 +384,33 @@ impl EpisodeSampler {
             order: Sampler::new(seed, episodes),
             lanes: Vec::new(),
             stagger,
+            start_jitter: 0,
         }
+    }
+
+    /// The same sampler entering episodes at a seeded step in `0..=jitter`
+    /// ([`EpisodeSampler::start_jitter`]).
+    pub fn with_start_jitter(mut self, jitter: usize) -> Self {
+        self.start_jitter = jitter;
+        self
+    }
+
+    /// Draws the next episode of the order and the step at which a lane enters it: 0, or with
+    /// [`EpisodeSampler::start_jitter`] a step seeded by the draw's position in the order.
+    fn draw_episode(&mut self, episode_len: &impl Fn(usize) -> usize) -> (usize, u64, usize) {
+        let draw = self.order.drawn;
+        let (episode, epoch) = self.order.next_batch(1)[0];
+        let first = if self.start_jitter == 0 {
+            0
+        } else {
+            let seed =
+                self.order.seed ^ 0x6a69_7474_6572_5f73 ^ draw.wrapping_mul(0x9e37_79b9_7f4a_7c15);
+            let last = self
+                .start_jitter
+                .min(episode_len(episode).saturating_sub(1));
+            ChaCha8Rng::seed_from_u64(seed).random_range(0..=last)
+        };
+        (episode, epoch, first)
     }
 
     /// The next batch: `lanes` chunks of `len` steps; `episode_len(k)` gives episode k's length.
@@ -380,7 +421,7 @@ impl EpisodeSampler {
         episode_len: impl Fn(usize) -> usize,
     ) -> Vec<ChunkSpan> {
         while self.lanes.len() < lanes {
-            let (episode, epoch) = self.order.next_batch(1)[0];
+            let (episode, epoch, first) = self.draw_episode(&episode_len);
             let stop = self.stagger.then(|| {
                 ChaCha8Rng::seed_from_u64(stop_seed(self.order.seed, self.lanes.len()))
                     .random_range(1..=episode_len(episode).max(1))
@@ -388,28 +429,31 @@ impl EpisodeSampler {
             self.lanes.push(Lane {
                 episode,
                 epoch,
-                start: 0,
-                stop,
+                start: first,
+                stop: stop.map(|s| s.max(first + 1)),
+                first,
             });
         }
-        self.lanes
-            .iter_mut()
-            .map(|lane| {
+        (0..self.lanes.len())
+            .map(|l| {
+                let lane = &self.lanes[l];
                 let end = episode_len(lane.episode).min(lane.stop.unwrap_or(usize::MAX));
                 if lane.start >= end {
-                    let (episode, epoch) = self.order.next_batch(1)[0];
-                    *lane = Lane {
+                    let (episode, epoch, first) = self.draw_episode(&episode_len);
+                    self.lanes[l] = Lane {
                         episode,
                         epoch,
-                        start: 0,
+                        start: first,
                         stop: None,
+                        first,
                     };
                 }
+                let lane = &mut self.lanes[l];
                 let span = ChunkSpan {
                     episode: lane.episode,
                     start: lane.start,
                     epoch: lane.epoch,
-                    fresh: lane.start == 0,
+                    fresh: lane.start == lane.first,
                 };
                 lane.start += len;
                 span
@@ -579,6 +623,50 @@ mod tests {
                 b.next_batch(2, 2, |k| lens[k])
             );
         }
+    }
+
+    #[test]
+    fn jittered_lanes_enter_episodes_at_seeded_steps_and_resume_exactly() {
+        let lens = |k: usize| 20 + k % 7;
+        let mut s = EpisodeSampler::new(5, 50, false).with_start_jitter(6);
+        let mut entries = Vec::new();
+        let mut next: std::collections::HashMap<usize, usize> = Default::default();
+        for _ in 0..80 {
+            for (lane, c) in s.next_batch(4, 3, lens).into_iter().enumerate() {
+                assert!(c.start < lens(c.episode));
+                if c.fresh {
+                    // A lane enters at step 0…6 and walks on from there in chunks of 3.
+                    assert!(c.start <= 6, "{c:?}");
+                    entries.push(c.start);
+                } else {
+                    assert_eq!(Some(&c.start), next.get(&lane), "{c:?}");
+                }
+                next.insert(lane, c.start + 3);
+            }
+        }
+        // Every entry step turns up, the first frame among them.
+        let seen: std::collections::BTreeSet<usize> = entries.iter().copied().collect();
+        assert_eq!(seen, (0..=6).collect(), "{entries:?}");
+        // The same seed draws the same entries; a resumed sampler continues identically.
+        let mut a = EpisodeSampler::new(5, 50, false).with_start_jitter(6);
+        let mut b = a.clone();
+        for _ in 0..30 {
+            assert_eq!(a.next_batch(4, 3, lens), b.next_batch(4, 3, lens));
+        }
+        let mut c: EpisodeSampler =
+            serde_json::from_str(&serde_json::to_string(&a).unwrap()).unwrap();
+        for _ in 0..30 {
+            assert_eq!(a.next_batch(4, 3, lens), c.next_batch(4, 3, lens));
+        }
+        // Without jitter the draws are those of a sampler that never had the option.
+        let mut plain = EpisodeSampler::new(5, 50, false);
+        let mut zero = EpisodeSampler::new(5, 50, false).with_start_jitter(0);
+        for _ in 0..30 {
+            let b = plain.next_batch(4, 3, lens);
+            assert!(b.iter().all(|c| c.fresh == (c.start == 0)));
+            assert_eq!(b, zero.next_batch(4, 3, lens));
+        }
+        assert!(!serde_json::to_string(&zero).unwrap().contains("jitter"));
     }
 
     #[test]

@@ -59,8 +59,10 @@ impl Draw {
     pub fn new(train: &TrainSection, data: &RunData) -> Self {
         Draw {
             windows: Sampler::new(train.seed, data.train.len()),
-            episodes: (train.sampling == Sampling::Episodes)
-                .then(|| EpisodeSampler::new(train.seed, data.train.num_episodes(), train.stagger)),
+            episodes: (train.sampling == Sampling::Episodes).then(|| {
+                EpisodeSampler::new(train.seed, data.train.num_episodes(), train.stagger)
+                    .with_start_jitter(train.start_jitter)
+            }),
         }
     }
 
