@@ -297,6 +297,13 @@ pub struct DecoderConfig {
     /// hand — is one linear score (absent: false).
     #[serde(default)]
     pub pointer_input_keys: bool,
+    /// The decoder also reads the progress head's belief (its distribution over the subgoals
+    /// done, detached, through a learned linear map) as one more token before the visual
+    /// tokens: the policy conditions on the count its own memory keeps, as the oracle variant
+    /// does on the recorded label, with nothing observed beyond the other variants' inputs.
+    /// Needs `loss.progress` > 0 (absent: false).
+    #[serde(default)]
+    pub belief: bool,
 }
 
 /// Language: word-level tokenizer over a fixed vocabulary + learned embeddings (model.md §8).
@@ -427,6 +434,7 @@ impl ModelConfig {
                 film: false,
                 pointer: false,
                 pointer_input_keys: false,
+                belief: false,
             },
             text: TextConfig {
                 vocab: Vec::new(),
@@ -497,6 +505,7 @@ impl ModelConfig {
                 film: false,
                 pointer: false,
                 pointer_input_keys: false,
+                belief: false,
             },
             text: TextConfig {
                 vocab: Vec::new(),
@@ -702,6 +711,11 @@ impl ModelConfig {
                 "decoder.pointer needs a continuous head (decoder.head = \"l1\" or \"l2\") and step \
                  queries (decoder.queries = \"step\")"
                     .into(),
+            );
+        }
+        if self.decoder.belief && self.loss.progress <= 0.0 {
+            return err(
+                "decoder.belief reads the progress head, which `loss.progress` > 0 builds".into(),
             );
         }
         if self.decoder.pointer_input_keys && !self.decoder.pointer {

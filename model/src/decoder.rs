@@ -364,6 +364,7 @@ mod tests {
             film: false,
             pointer: false,
             pointer_input_keys: false,
+            belief: false,
         }
     }
 

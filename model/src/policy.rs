@@ -6,6 +6,7 @@
 use std::path::Path;
 
 use burn::module::Param;
+use burn::nn::{Linear, LinearConfig};
 use burn::prelude::*;
 use burn::tensor::Distribution;
 
@@ -102,6 +103,9 @@ pub struct PolicyModel {
     pub pointer: Option<PointerHead>,
     /// Progress head over each frame's visual tokens (with `loss.progress` > 0; training only).
     pub progress: Option<ProgressHead>,
+    /// With `decoder.belief`: the map of the progress head's distribution to the belief token,
+    /// [`crate::heads::PROGRESS_CLASSES`] → D_dec.
+    pub belief: Option<Linear>,
     /// The configuration this model was built from.
     #[module(skip)]
     pub config: ModelConfig,
@@ -138,6 +142,10 @@ impl PolicyModel {
                 }
             },
             progress: (config.loss.progress > 0.0).then(|| ProgressHead::new(w, device)),
+            belief: config
+                .decoder
+                .belief
+                .then(|| LinearConfig::new(crate::heads::PROGRESS_CLASSES, w).init(device)),
             config: config.clone(),
         })
     }
@@ -162,6 +170,30 @@ impl PolicyModel {
         (self.token_type.val(), &self.text)
     }
 
+    /// With `decoder.belief`, the visual tokens with the belief token before them: the progress
+    /// head's distribution over the subgoals done, read off these tokens and detached, mapped to
+    /// the decoder width; else the tokens as they are.
+    ///
+    /// # Shapes
+    /// - visual: `[N, V, D_dec]`, pad `[N, V]` → `[N, V + 1, D_dec]`, `[N, V + 1]`
+    fn with_belief(
+        &self,
+        visual: Tensor<3>,
+        pad: Option<Tensor<2, Bool>>,
+    ) -> (Tensor<3>, Option<Tensor<2, Bool>>) {
+        let (Some(map), Some(head)) = (&self.belief, &self.progress) else {
+            return (visual, pad);
+        };
+        let [n, _, d] = visual.dims();
+        let probs = burn::tensor::activation::softmax(head.forward(visual.clone(), pad.clone()), 1);
+        let token = map.forward(probs.detach()).reshape([n, 1, d]);
+        let pad = pad.map(|p| {
+            let open = Tensor::<2>::zeros([n, 1], &p.device()).greater_elem(0.5);
+            Tensor::cat(vec![open, p], 1)
+        });
+        (Tensor::cat(vec![token, visual], 1), pad)
+    }
+
     /// Decodes per frame given language ids; with a pointer head, `state` is each frame's
     /// object tokens (features and categories), the last K of the visual tokens.
     ///
@@ -176,6 +208,7 @@ impl PolicyModel {
         state: Option<(Tensor<3>, Tensor<2, Int>)>,
     ) -> Result<DecoderOutput> {
         let (lang, lang_pad) = self.text.tokens(instruction);
+        let (visual, pad) = self.with_belief(visual, pad);
         let mut out = self.decoder.forward(visual, pad, lang, lang_pad);
         if let Some(pointer) = &self.pointer {
             let Some((features, categories)) = state else {
@@ -745,6 +778,66 @@ mod tests {
                 "{name}: the decoder moved"
             );
         }
+    }
+
+    /// The belief token: the decoder reads the progress head's distribution (detached), so the
+    /// action loss moves its map but never the progress head through it; a belief without the
+    /// progress loss is refused; the streamed policy reads the same belief as the window forward.
+    #[test]
+    fn belief_token_feeds_the_progress_head_to_the_decoder() {
+        let cfg = belief_checks();
+        // (after the autodiff device's lock is released)
+        streaming_equals_window(cfg, 10);
+    }
+
+    /// The window-forward half of the belief test; returns the config it checked.
+    fn belief_checks() -> ModelConfig {
+        let (_guard, device) = test_autodiff_device();
+        device.seed(6);
+        let (b, t) = (2, 4);
+        let mut cfg = micro("e_slotssm");
+        cfg.decoder.belief = true;
+        assert!(
+            cfg.validate()
+                .unwrap_err()
+                .to_string()
+                .contains("decoder.belief reads the progress head"),
+        );
+        cfg.loss.progress = 0.5;
+        let model = PolicyModel::new(&cfg, &device).unwrap();
+        let mut x = batch(&cfg, b, t, &device);
+        x.progress = Some(Tensor::from_ints([[0, 0, 1, 1], [2, 2, 2, 3]], &device));
+        let (out, losses) = model.forward(&x).unwrap();
+        assert_eq!(out.actions.dims(), [b, t, cfg.decoder.horizon, 7]);
+        // The same weights without the belief token act differently.
+        let mut plain_cfg = cfg.clone();
+        plain_cfg.decoder.belief = false;
+        let mut plain = PolicyModel::new(&plain_cfg, &device).unwrap();
+        plain.encoder = model.encoder.clone();
+        plain.tokens = model.tokens.clone();
+        plain.token_type = model.token_type.clone();
+        plain.text = model.text.clone();
+        plain.decoder = model.decoder.clone();
+        plain.progress = model.progress.clone();
+        let (plain_out, _) = plain.forward(&x).unwrap();
+        let diff = scalar(
+            (out.actions.clone() - plain_out.actions)
+                .abs()
+                .max()
+                .reshape([1]),
+        );
+        assert!(diff > 1e-4, "the belief token changed nothing ({diff})");
+        // The action loss reaches the belief map and the decoder, not the progress head.
+        let grads = losses.action.backward();
+        let check = GradCheck::run(&model, &grads);
+        let moved = |part: &str| !check.bad.iter().any(|p| p.starts_with(part));
+        assert!(moved("belief") && moved("decoder."), "{:?}", check.bad);
+        assert!(
+            check.bad.iter().any(|p| p.starts_with("progress")),
+            "the action loss moved the progress head: {:?}",
+            check.bad
+        );
+        cfg
     }
 
     #[test]
