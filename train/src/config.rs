@@ -294,7 +294,7 @@ pub struct TrainSection {
     /// that the time since the memory started does not tell where the demo is (a policy whose
     /// memory can tell the time may otherwise follow one path timed from the start instead of
     /// reading the scene). The skipped steps are not fed.
-    #[serde(skip_serializing_if = "is_zero_steps")]
+    #[serde(skip_serializing_if = "crate::dataset::is_zero")]
     pub start_jitter: usize,
     /// Data-parallel replicas of the model (default 1): each step splits the batch into this
     /// many groups of consecutive lanes, runs each group's forward and backward on its own
@@ -343,10 +343,6 @@ pub struct TrainSection {
 }
 
 pub use crate::stages::Stage;
-
-fn is_zero_steps(n: &usize) -> bool {
-    *n == 0
-}
 
 fn is_one(n: &usize) -> bool {
     *n == 1

@@ -322,7 +322,8 @@ pub struct Lane {
     pub first: usize,
 }
 
-fn is_zero(n: &usize) -> bool {
+/// Whether a count is zero (serde: counts left out of configs and checkpoints at their default).
+pub(crate) fn is_zero(n: &usize) -> bool {
     *n == 0
 }
 
