@@ -225,8 +225,10 @@ fn the_idle_tail_reaches_the_batch_at_its_weight() {
     let (w, ha) = (cfg.window_len(), mcfg.decoder.horizon);
     // The last frame's chunk of the window ending at step t: one weight per chunk step (the
     // seven action dims of a step share it).
-    let weights = |t: usize| -> Vec<f32> {
-        let batch = run_data.batch(&run_data.train, &[(t, 0)], &device).unwrap();
+    let weights_with = |t: usize, idle_tail: bool| -> Vec<f32> {
+        let batch = run_data
+            .batch_with(&run_data.train, &[(t, 0)], idle_tail, &device)
+            .unwrap();
         let m = batch.action_mask.expect("the batcher weighs the actions");
         let v = m.narrow(1, w - 1, 1).try_to_vec_as::<f32>().unwrap();
         v.chunks(7)
@@ -249,8 +251,15 @@ fn the_idle_tail_reaches_the_batch_at_its_weight() {
             })
             .collect()
     };
+    let weights = |t: usize| weights_with(t, true);
     for t in [tail - 2, tail - 1, tail, n - 2, n - 1] {
         assert_eq!(weights(t), expect(t), "window ending at step {t} of {n}");
+        // A stage with `idle_tail = false`: the moves keep their weight, the tail gets none.
+        let without: Vec<f32> = expect(t)
+            .iter()
+            .map(|&x| if x == 1.0 { 1.0 } else { 0.0 })
+            .collect();
+        assert_eq!(weights_with(t, false), without, "step {t}, no idle tail");
     }
     assert!(weights(tail - 1).contains(&1.0) && weights(tail - 1).contains(&0.5));
 }

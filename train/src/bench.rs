@@ -101,7 +101,7 @@ pub fn run(cfg: &Config, opts: &BenchOptions, progress: bool) -> Result<BenchRep
     let started = Instant::now();
     for _ in 0..batches {
         let key = draw.next(&data, batch_size, window);
-        loader::prepare(&data, key, 1, &device)?;
+        loader::prepare(&data, key, true, 1, &device)?;
     }
     let loader_windows_per_s = (batches * batch_size) as f64 / started.elapsed().as_secs_f64();
     drop(data);

@@ -591,6 +591,15 @@ impl Config {
             }
         }
         crate::stages::check(&t.stages)?;
+        if let Some(i) = t.stages.iter().position(|s| !s.idle_tail)
+            && !self.data.mask_idle_tail
+        {
+            return Err(format!(
+                "train.stages[{i}] (`{}`).idle_tail: leaves out the idle tail that \
+                 `data.mask_idle_tail = true` marks; without it there is none",
+                t.stages[i].name
+            ));
+        }
         if self.data.window == Some(0) {
             return Err("data.window: must be ≥ 1".into());
         }
@@ -792,6 +801,21 @@ variant = "e_slotssm"
         assert_eq!(Config::parse(&c.to_toml()).unwrap(), c);
         let e = Config::parse(&text.replace("freeze", "frezee")).unwrap_err();
         assert!(e.contains("frezee"), "{e}");
+        // A stage without the idle tail: written only when false, refused without a tail.
+        assert!(!c.to_toml().contains("idle_tail"));
+        let no_tail = text.replace("freeze = [\"decoder\"]", "idle_tail = false");
+        let e = Config::parse(&no_tail).unwrap_err();
+        assert!(
+            e.contains("train.stages[0] (`slots`).idle_tail")
+                && e.contains("`data.mask_idle_tail = true`"),
+            "{e}"
+        );
+        let c =
+            Config::parse(&no_tail.replace("dir = \"d\"", "dir = \"d\"\nmask_idle_tail = true"))
+                .unwrap();
+        assert!(!c.train.stages[0].idle_tail && c.train.stages[1].idle_tail);
+        assert!(c.to_toml().contains("idle_tail = false"));
+        assert_eq!(Config::parse(&c.to_toml()).unwrap(), c);
         // A part the model lacks is checked against the built model (stages::check_freeze).
     }
 

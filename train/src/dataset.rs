@@ -126,6 +126,17 @@ pub fn generate_dataset(spec: &GenerateSpec, dir: &Path, progress: bool) -> Resu
     Ok(index)
 }
 
+/// Leaves a window's idle tail out of its action loss: the weight of every action that is not
+/// a real step ([`data::WindowSample::action_mask`] false: the idle tail, or past the end, already
+/// 0) becomes 0.
+fn drop_idle_tail(s: &mut data::WindowSample) {
+    for (w, &real) in s.action_weights.iter_mut().zip(&s.action_mask) {
+        if !real {
+            *w = 0.0;
+        }
+    }
+}
+
 /// Train and validation windows of a dataset, with the batcher.
 pub struct RunData {
     /// The dataset index.
@@ -221,11 +232,25 @@ impl RunData {
         indices: &[(usize, u64)],
         device: &Device,
     ) -> Result<model::WindowBatch> {
+        self.batch_with(ds, indices, true, device)
+    }
+
+    /// [`Self::batch`], the idle tails weighted (`idle_tail`) or left out of the action loss.
+    pub fn batch_with(
+        &self,
+        ds: &WindowDataset,
+        indices: &[(usize, u64)],
+        idle_tail: bool,
+        device: &Device,
+    ) -> Result<model::WindowBatch> {
         use rayon::prelude::*;
-        let samples = indices
+        let mut samples = indices
             .par_iter()
             .map(|&(i, epoch)| ds.get_with_epoch(i, epoch))
             .collect::<data::Result<Vec<_>>>()?;
+        if !idle_tail {
+            samples.iter_mut().for_each(drop_idle_tail);
+        }
         Ok(self.processor.batch(&samples, device)?)
     }
 
@@ -236,11 +261,25 @@ impl RunData {
         spans: &[ChunkSpan],
         device: &Device,
     ) -> Result<(model::WindowBatch, Tensor<1, Bool>)> {
+        self.chunk_batch_with(spans, true, device)
+    }
+
+    /// [`Self::chunk_batch`], the idle tails weighted (`idle_tail`) or left out of the action
+    /// loss.
+    pub fn chunk_batch_with(
+        &self,
+        spans: &[ChunkSpan],
+        idle_tail: bool,
+        device: &Device,
+    ) -> Result<(model::WindowBatch, Tensor<1, Bool>)> {
         use rayon::prelude::*;
-        let samples = spans
+        let mut samples = spans
             .par_iter()
             .map(|s| self.train.chunk(s.episode, s.start, s.epoch))
             .collect::<data::Result<Vec<_>>>()?;
+        if !idle_tail {
+            samples.iter_mut().for_each(drop_idle_tail);
+        }
         let fresh: Vec<bool> = spans.iter().map(|s| s.fresh).collect();
         let fresh = Tensor::from_data(TensorData::new(fresh, [spans.len()]), device);
         Ok((self.processor.batch(&samples, device)?, fresh))

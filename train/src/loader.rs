@@ -90,6 +90,8 @@ pub struct Shard {
 pub struct Prepared {
     /// What it was drawn from.
     pub key: DrawKey,
+    /// Whether its idle tails are in the action loss.
+    pub idle_tail: bool,
     /// The batch's lanes in `N` groups of `B / N`, in lane order.
     pub shards: Vec<Shard>,
     /// Seconds the loader spent making it.
@@ -97,8 +99,15 @@ pub struct Prepared {
 }
 
 /// Makes the batch of `key` from the training split on `device`, in `shards` groups of
-/// consecutive lanes (`shards` divides the batch size; 1 = the whole batch).
-pub fn prepare(data: &RunData, key: DrawKey, shards: usize, device: &Device) -> Result<Prepared> {
+/// consecutive lanes (`shards` divides the batch size; 1 = the whole batch), the idle tails
+/// weighted (`idle_tail`, see [`crate::stages::idle_tail`]) or left out of the action loss.
+pub fn prepare(
+    data: &RunData,
+    key: DrawKey,
+    idle_tail: bool,
+    shards: usize,
+    device: &Device,
+) -> Result<Prepared> {
     let started = Instant::now();
     let shards = shards.max(1);
     let parts = match &key {
@@ -106,7 +115,7 @@ pub fn prepare(data: &RunData, key: DrawKey, shards: usize, device: &Device) -> 
             .chunks(indices.len().div_ceil(shards).max(1))
             .map(|part| {
                 Ok(Shard {
-                    batch: data.batch(&data.train, part, device)?,
+                    batch: data.batch_with(&data.train, part, idle_tail, device)?,
                     fresh: None,
                 })
             })
@@ -114,7 +123,7 @@ pub fn prepare(data: &RunData, key: DrawKey, shards: usize, device: &Device) -> 
         DrawKey::Episodes(spans) => spans
             .chunks(spans.len().div_ceil(shards).max(1))
             .map(|part| {
-                let (batch, fresh) = data.chunk_batch(part, device)?;
+                let (batch, fresh) = data.chunk_batch_with(part, idle_tail, device)?;
                 Ok(Shard {
                     batch,
                     fresh: Some(fresh),
@@ -124,6 +133,7 @@ pub fn prepare(data: &RunData, key: DrawKey, shards: usize, device: &Device) -> 
     };
     Ok(Prepared {
         key,
+        idle_tail,
         shards: parts,
         prepare_s: started.elapsed().as_secs_f64(),
     })
@@ -136,8 +146,9 @@ pub struct Prefetcher {
 }
 
 impl Prefetcher {
-    /// Starts preparing `count` batches drawn by `draw` (a copy of the loop's sampler), each
-    /// in `shards` lane groups.
+    /// Starts preparing the batches of steps `steps` (0-based steps done before each) drawn by
+    /// `draw` (a copy of the loop's sampler), each in `shards` lane groups, their idle tails
+    /// as `stages` say.
     #[allow(clippy::too_many_arguments)]
     pub fn spawn(
         data: Arc<RunData>,
@@ -145,7 +156,8 @@ impl Prefetcher {
         batch_size: usize,
         window: usize,
         shards: usize,
-        count: u64,
+        steps: std::ops::Range<u64>,
+        stages: Vec<crate::stages::Stage>,
         depth: usize,
         device: Device,
     ) -> Self {
@@ -153,9 +165,10 @@ impl Prefetcher {
         let handle = std::thread::Builder::new()
             .name("train-loader".into())
             .spawn(move || {
-                for _ in 0..count {
+                for step in steps {
                     let key = draw.next(&data, batch_size, window);
-                    let item = prepare(&data, key, shards, &device);
+                    let tail = crate::stages::idle_tail(&stages, step);
+                    let item = prepare(&data, key, tail, shards, &device);
                     let failed = item.is_err();
                     // The receiver is gone when the loop stopped early (an error, stop_at).
                     if tx.send(item).is_err() || failed {

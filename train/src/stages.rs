@@ -43,6 +43,25 @@ pub struct Stage {
     /// `decoder`, `text`, …; [`parts`] lists a model's).
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub freeze: Vec<String>,
+    /// Whether the episodes' idle tails (`data.mask_idle_tail`) keep their weight
+    /// `data.idle_tail_weight` in this stage's action loss (default true); false leaves them
+    /// out, as `data.idle_tail_weight = 0` would (e.g. a first stage that learns the motion before
+    /// the tails teach where it stops).
+    #[serde(default = "yes", skip_serializing_if = "is_yes")]
+    pub idle_tail: bool,
+}
+
+fn yes() -> bool {
+    true
+}
+
+fn is_yes(b: &bool) -> bool {
+    *b
+}
+
+/// Whether step `step`'s batch weights the idle tails: false only in a stage that says so.
+pub fn idle_tail(stages: &[Stage], step: u64) -> bool {
+    active(stages, step).is_none_or(|(_, s)| s.idle_tail)
 }
 
 /// Loss terms a stage may switch on.
@@ -222,6 +241,7 @@ mod tests {
             steps,
             losses: vec!["action".into()],
             freeze: vec![],
+            idle_tail: true,
         }
     }
 
@@ -242,6 +262,16 @@ mod tests {
         let mut bad = stage("x", None);
         bad.losses = vec!["actoin".into()];
         assert!(check(&[bad]).unwrap_err().contains("train.stages[0]"));
+    }
+
+    #[test]
+    fn idle_tails_are_left_out_only_in_the_stages_that_say_so() {
+        assert!((0..10).all(|step| idle_tail(&[], step)));
+        let mut first = stage("motion", Some(3));
+        first.idle_tail = false;
+        let s = vec![first, stage("all", None)];
+        let tails: Vec<bool> = (0..6).map(|step| idle_tail(&s, step)).collect();
+        assert_eq!(tails, [false, false, false, true, true, true]);
     }
 
     #[test]

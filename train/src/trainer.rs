@@ -559,7 +559,8 @@ pub fn train(cfg: &Config, opts: &TrainOptions) -> Result<TrainSummary> {
             t.batch_size,
             window,
             t.replicas,
-            end - state.step,
+            state.step..end,
+            t.stages.clone(),
             PREFETCH_DEPTH,
             ad.clone(),
         )
@@ -578,10 +579,11 @@ pub fn train(cfg: &Config, opts: &TrainOptions) -> Result<TrainSummary> {
             t.batch_size,
             window,
         );
+        let idle_tail = stages::idle_tail(&t.stages, state.step);
         let prepared = match &prefetch {
             Some(p) => {
                 let prepared = p.next()?;
-                if prepared.key != key {
+                if prepared.key != key || prepared.idle_tail != idle_tail {
                     return Err(TrainError::Other(format!(
                         "step {}: the loader drew other windows than the sampler",
                         state.step + 1
@@ -589,7 +591,7 @@ pub fn train(cfg: &Config, opts: &TrainOptions) -> Result<TrainSummary> {
                 }
                 prepared
             }
-            None => loader::prepare(&data, key, t.replicas, &ad)?,
+            None => loader::prepare(&data, key, idle_tail, t.replicas, &ad)?,
         };
         // Time the step waited for its batch (with the loader thread: ~0 once it keeps up).
         let data_s = data_started.elapsed().as_secs_f64();
