@@ -104,11 +104,13 @@ fn is_unit(v: &f64) -> bool {
     *v == 1.0
 }
 
-fn yes() -> bool {
+/// serde default of switches that are on unless a config turns them off.
+pub(crate) fn yes() -> bool {
     true
 }
 
-fn is_yes(v: &bool) -> bool {
+/// Whether a switch is at its default, on (serde leaves it out then).
+pub(crate) fn is_yes(v: &bool) -> bool {
     *v
 }
 

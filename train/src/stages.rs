@@ -47,16 +47,11 @@ pub struct Stage {
     /// `data.idle_tail_weight` in this stage's action loss (default true); false leaves them
     /// out, as `data.idle_tail_weight = 0` would (e.g. a first stage that learns the motion before
     /// the tails teach where it stops).
-    #[serde(default = "yes", skip_serializing_if = "is_yes")]
+    #[serde(
+        default = "crate::config::yes",
+        skip_serializing_if = "crate::config::is_yes"
+    )]
     pub idle_tail: bool,
-}
-
-fn yes() -> bool {
-    true
-}
-
-fn is_yes(b: &bool) -> bool {
-    *b
 }
 
 /// Whether step `step`'s batch weights the idle tails: false only in a stage that says so.

@@ -585,7 +585,8 @@ pub fn train(cfg: &Config, opts: &TrainOptions) -> Result<TrainSummary> {
                 let prepared = p.next()?;
                 if prepared.key != key || prepared.idle_tail != idle_tail {
                     return Err(TrainError::Other(format!(
-                        "step {}: the loader drew other windows than the sampler",
+                        "step {}: the loader prepared other windows than the sampler drew \
+                         (or weighted their idle tails otherwise than the stage says)",
                         state.step + 1
                     )));
                 }
