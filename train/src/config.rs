@@ -298,6 +298,18 @@ pub struct TrainSection {
     /// reading the scene). The skipped steps are not fed.
     #[serde(skip_serializing_if = "crate::dataset::is_zero")]
     pub start_jitter: usize,
+    /// `episodes` sampling: the first `prefix_lanes` lanes of each batch walk only the first
+    /// `prefix_steps` steps of each episode (rounded up to whole chunks) and then take the next
+    /// episode, while the other lanes walk whole episodes. A lane walking whole episodes meets
+    /// an episode start once per episode (one chunk in 20 on T3), and only there is the first
+    /// move not a continuation of the moves before it; prefix lanes see episode starts
+    /// `episode length / prefix_steps` times as often (0, the default: every lane walks whole
+    /// episodes).
+    #[serde(skip_serializing_if = "crate::dataset::is_zero")]
+    pub prefix_lanes: usize,
+    /// Steps of each episode a prefix lane walks (see `prefix_lanes`; needs it).
+    #[serde(skip_serializing_if = "crate::dataset::is_zero")]
+    pub prefix_steps: usize,
     /// Data-parallel replicas of the model (default 1): each step splits the batch into this
     /// many groups of consecutive lanes, runs each group's forward and backward on its own
     /// thread with its own copy of the weights, and sums their gradients, each replica's loss
@@ -369,6 +381,8 @@ impl Default for TrainSection {
             sampling: Sampling::default(),
             stagger: false,
             start_jitter: 0,
+            prefix_lanes: 0,
+            prefix_steps: 0,
             replicas: 1,
             ema: None,
             lr: 3e-4,
@@ -492,9 +506,30 @@ impl Config {
         }
         if self.train.start_jitter > 0 && self.train.sampling != Sampling::Episodes {
             return Err(
-                "train.start_jitter: jitters where lanes enter episodes, which only                  `train.sampling = \"episodes\"` has"
+                "train.start_jitter: jitters where lanes enter episodes, which only \
+                 `train.sampling = \"episodes\"` has"
                     .into(),
             );
+        }
+        let (lanes, steps) = (self.train.prefix_lanes, self.train.prefix_steps);
+        if (lanes > 0) != (steps > 0) {
+            return Err(format!(
+                "train.prefix_lanes = {lanes} with train.prefix_steps = {steps}: set both (lanes \
+                 walking the first prefix_steps steps of each episode) or neither"
+            ));
+        }
+        if lanes > 0 && self.train.sampling != Sampling::Episodes {
+            return Err(
+                "train.prefix_lanes: cuts the episodes that lanes walk, which only \
+                 `train.sampling = \"episodes\"` has"
+                    .into(),
+            );
+        }
+        if lanes > self.train.batch_size {
+            return Err(format!(
+                "train.prefix_lanes = {lanes}: more than the batch's {} lanes",
+                self.train.batch_size
+            ));
         }
         let g = self.data.gripper_switch_weight;
         if !(g.is_finite() && (1.0..=100.0).contains(&g)) {
@@ -1099,6 +1134,42 @@ variant = "e_slotssm"
                 && e.to_string().contains(&p.display().to_string()),
             "{e}"
         );
+        let c = Config::load_with(
+            &p,
+            &sets(&["train.prefix_lanes=4", "train.prefix_steps=40"]),
+        )
+        .unwrap();
+        assert_eq!((c.train.prefix_lanes, c.train.prefix_steps), (4, 40));
+        let toml = c.to_toml();
+        assert!(toml.contains("prefix_lanes = 4") && toml.contains("prefix_steps = 40"));
+        assert!(
+            !Config::load_with(&p, &sets(&[]))
+                .unwrap()
+                .to_toml()
+                .contains("prefix_")
+        );
+        for (bad, want) in [
+            (vec!["train.prefix_lanes=4"], "set both"),
+            (vec!["train.prefix_steps=40"], "set both"),
+            (
+                vec!["train.prefix_lanes=9", "train.prefix_steps=40"],
+                "train.prefix_lanes = 9: more than the batch's 8 lanes",
+            ),
+            (
+                vec![
+                    "train.prefix_lanes=4",
+                    "train.prefix_steps=40",
+                    "train.sampling=\"windows\"",
+                ],
+                "train.prefix_lanes: cuts the episodes that lanes walk",
+            ),
+        ] {
+            let e = Config::load_with(&p, &sets(&bad)).unwrap_err().to_string();
+            assert!(
+                e.contains(want) && e.contains(&p.display().to_string()),
+                "{bad:?}: {e}"
+            );
+        }
         let c = Config::load_with(&p, &sets(&["data.gripper_switch_weight=4"])).unwrap();
         assert_eq!(c.data.gripper_switch_weight, 4.0);
         assert!(c.to_toml().contains("gripper_switch_weight = 4.0"));

@@ -410,6 +410,14 @@ pub struct EpisodeSampler {
     /// the start; the steps before the entry are skipped, never fed as padding.
     #[serde(default, skip_serializing_if = "is_zero")]
     pub start_jitter: usize,
+    /// `train.prefix_lanes`: lanes 0…prefix_lanes−1 leave each episode after
+    /// [`EpisodeSampler::prefix_steps`] steps (0, the default: every lane walks whole episodes).
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub prefix_lanes: usize,
+    /// `train.prefix_steps`: the steps a prefix lane walks of each episode (rounded up to whole
+    /// chunks).
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub prefix_steps: usize,
 }
 
 /// Seed of lane `lane`'s first stop, from the sampler's seed.
@@ -425,6 +433,27 @@ impl EpisodeSampler {
             lanes: Vec::new(),
             stagger,
             start_jitter: 0,
+            prefix_lanes: 0,
+            prefix_steps: 0,
+        }
+    }
+
+    /// The same sampler with its first `lanes` lanes walking only the first `steps` steps of
+    /// each episode ([`EpisodeSampler::prefix_lanes`]; the staggered first stop does not apply
+    /// to them).
+    pub fn with_prefix_lanes(mut self, lanes: usize, steps: usize) -> Self {
+        self.prefix_lanes = lanes;
+        self.prefix_steps = steps;
+        self
+    }
+
+    /// Where lane `lane` leaves an episode it entered at `first`: after the prefix for a prefix
+    /// lane, else `otherwise`.
+    fn lane_stop(&self, lane: usize, first: usize, otherwise: Option<usize>) -> Option<usize> {
+        if lane < self.prefix_lanes {
+            Some(first + self.prefix_steps.max(1))
+        } else {
+            otherwise
         }
     }
 
@@ -466,11 +495,12 @@ impl EpisodeSampler {
                 ChaCha8Rng::seed_from_u64(stop_seed(self.order.seed, self.lanes.len()))
                     .random_range(1..=episode_len(episode).max(1))
             });
+            let stop = self.lane_stop(self.lanes.len(), first, stop.map(|s| s.max(first + 1)));
             self.lanes.push(Lane {
                 episode,
                 epoch,
                 start: first,
-                stop: stop.map(|s| s.max(first + 1)),
+                stop,
                 first,
             });
         }
@@ -484,7 +514,7 @@ impl EpisodeSampler {
                         episode,
                         epoch,
                         start: first,
-                        stop: None,
+                        stop: self.lane_stop(l, first, None),
                         first,
                     };
                 }
@@ -707,6 +737,58 @@ mod tests {
             assert_eq!(b, zero.next_batch(4, 3, lens));
         }
         assert!(!serde_json::to_string(&zero).unwrap().contains("jitter"));
+    }
+
+    #[test]
+    fn prefix_lanes_walk_episode_starts_and_resume_exactly() {
+        let lens = |k: usize| 20 + k % 7;
+        // 4 lanes in chunks of 3; lanes 0 and 1 walk the first 5 steps (two chunks) of each episode.
+        let mut s = EpisodeSampler::new(5, 50, false).with_prefix_lanes(2, 5);
+        let mut walked: Vec<Vec<usize>> = vec![Vec::new(); 4];
+        let mut fresh = [0usize; 4];
+        for _ in 0..60 {
+            for (lane, c) in s.next_batch(4, 3, lens).into_iter().enumerate() {
+                assert!(c.start < lens(c.episode));
+                assert_eq!(c.fresh, c.start == 0, "{c:?}");
+                if c.fresh {
+                    fresh[lane] += 1;
+                } else {
+                    assert_eq!(walked[lane].last(), Some(&(c.start - 3)), "{c:?}");
+                }
+                walked[lane].push(c.start);
+            }
+        }
+        // Prefix lanes only ever feed the chunks at steps 0 and 3; the others walk on to the end.
+        for lane in 0..2 {
+            assert!(
+                walked[lane].iter().all(|&t| t == 0 || t == 3),
+                "{:?}",
+                walked[lane]
+            );
+            assert_eq!(fresh[lane], 30);
+        }
+        for lane in 2..4 {
+            assert!(walked[lane].iter().any(|&t| t >= 18), "{:?}", walked[lane]);
+            assert!(fresh[lane] <= 9, "{fresh:?}");
+        }
+        // The same seed draws the same chunks; a sampler read back from JSON continues identically.
+        let mut a = EpisodeSampler::new(5, 50, false).with_prefix_lanes(2, 5);
+        for _ in 0..13 {
+            a.next_batch(4, 3, lens);
+        }
+        let mut b: EpisodeSampler =
+            serde_json::from_str(&serde_json::to_string(&a).unwrap()).unwrap();
+        for _ in 0..40 {
+            assert_eq!(a.next_batch(4, 3, lens), b.next_batch(4, 3, lens));
+        }
+        // Without prefix lanes the draws are those of a sampler that never had the option, and
+        // nothing new is written to the checkpoint.
+        let mut plain = EpisodeSampler::new(5, 50, false);
+        let mut zero = EpisodeSampler::new(5, 50, false).with_prefix_lanes(0, 0);
+        for _ in 0..30 {
+            assert_eq!(plain.next_batch(4, 3, lens), zero.next_batch(4, 3, lens));
+        }
+        assert!(!serde_json::to_string(&zero).unwrap().contains("prefix"));
     }
 
     #[test]

@@ -62,6 +62,7 @@ impl Draw {
             episodes: (train.sampling == Sampling::Episodes).then(|| {
                 EpisodeSampler::new(train.seed, data.train.num_episodes(), train.stagger)
                     .with_start_jitter(train.start_jitter)
+                    .with_prefix_lanes(train.prefix_lanes, train.prefix_steps)
             }),
         }
     }
