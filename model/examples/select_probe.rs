@@ -31,6 +31,7 @@
 //! - `reach motion=1 frames=16`: frame 0 reaches 96 % at 1 000 steps and 34 % at 1 500 for
 //!   slotvla_h1, 208 % and 41 % for e_slotssm (its later frames 67 % at 1 000): memory delays the
 //!   first move by ≈ 250 steps here, not by thousands.
+//!
 //! So the decoder learns to pick a token by category or by a property in 1 000–3 000 steps when
 //! every window starts a scene; the ≈ 10 000 steps the T1/T3 reach needs on recorded demos are not
 //! the selection itself.
@@ -128,9 +129,8 @@ impl Probe {
                 cats.push(model::io::state::ROBOT);
                 let a: Vec<f32> = (0..3).map(|i| (1.5 * x[off + 3 + i]).tanh()).collect();
                 for _ in 0..self.horizon {
-                    for i in 0..7 {
-                        targets.push(if i < 3 { a[i] } else { 0.0 });
-                    }
+                    targets.extend(&a);
+                    targets.extend([0.0; 4]);
                 }
                 if self.motion {
                     for (i, ai) in a.iter().enumerate() {
