@@ -350,9 +350,10 @@ pub struct Lane {
     pub epoch: u64,
     /// First step of the lane's next chunk.
     pub start: usize,
-    /// Step at which the lane leaves this episode before its end (the first episode of each
-    /// lane only: see [`EpisodeSampler`]); None walks it to its end. Absent in checkpoints
-    /// written before lanes were staggered.
+    /// Step at which the lane leaves this episode before its end (with `stagger`, the first
+    /// episode of each lane; with [`EpisodeSampler::prefix_lanes`], every episode of a prefix
+    /// lane); None walks it to its end. Absent in checkpoints written before lanes were
+    /// staggered.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub stop: Option<usize>,
     /// Step at which the lane entered this episode (0 unless the sampler jitters starts: see
