@@ -301,7 +301,7 @@ pub struct TrainSection {
     /// `episodes` sampling: the first `prefix_lanes` lanes of each batch walk only the first
     /// `prefix_steps` steps of each episode (rounded up to whole chunks) and then take the next
     /// episode, while the other lanes walk whole episodes. A lane walking whole episodes meets
-    /// an episode start once per episode (one chunk in 20 on T3), and only there is the first
+    /// an episode start once per episode (one chunk in 21–27 on T3's demos), and only there is the first
     /// move not a continuation of the moves before it; prefix lanes see episode starts
     /// `episode length / prefix_steps` times as often (0, the default: every lane walks whole
     /// episodes).
@@ -504,13 +504,6 @@ impl Config {
                     .into(),
             );
         }
-        if self.train.start_jitter > 0 && self.train.sampling != Sampling::Episodes {
-            return Err(
-                "train.start_jitter: jitters where lanes enter episodes, which only \
-                 `train.sampling = \"episodes\"` has"
-                    .into(),
-            );
-        }
         let (lanes, steps) = (self.train.prefix_lanes, self.train.prefix_steps);
         if (lanes > 0) != (steps > 0) {
             return Err(format!(
@@ -518,12 +511,24 @@ impl Config {
                  walking the first prefix_steps steps of each episode) or neither"
             ));
         }
-        if lanes > 0 && self.train.sampling != Sampling::Episodes {
-            return Err(
-                "train.prefix_lanes: cuts the episodes that lanes walk, which only \
-                 `train.sampling = \"episodes\"` has"
-                    .into(),
-            );
+        // Options of the episode sampler, away from their defaults.
+        for (key, set, what) in [
+            (
+                "train.start_jitter",
+                self.train.start_jitter > 0,
+                "jitters where lanes enter episodes",
+            ),
+            (
+                "train.prefix_lanes",
+                lanes > 0,
+                "cuts the episodes that lanes walk",
+            ),
+        ] {
+            if set && self.train.sampling != Sampling::Episodes {
+                return Err(format!(
+                    "{key}: {what}, which only `train.sampling = \"episodes\"` has"
+                ));
+            }
         }
         if lanes > self.train.batch_size {
             return Err(format!(
