@@ -68,6 +68,8 @@ impl Rng {
 }
 
 const F: usize = 15;
+/// The instruction of every scene.
+const INSTRUCTION: &str = "lift the bowl and place it back";
 
 struct Probe {
     task: String,
@@ -118,12 +120,6 @@ impl Probe {
             let mut x = base.clone();
             let off = sel * F;
             for _ in 0..t {
-                for (k, (v, d)) in x.iter_mut().zip(&drift).enumerate() {
-                    // Number 14 is the token's property: it does not drift.
-                    if k % F != 14 {
-                        *v += d;
-                    }
-                }
                 feats.extend(&x);
                 cats.extend(&cat);
                 cats.push(model::io::state::ROBOT);
@@ -138,6 +134,12 @@ impl Probe {
                             x[k * F + 3 + i] -= 0.15 * ai;
                         }
                         x[self.objects * F + i] += 0.15 * ai;
+                    }
+                }
+                for (k, (v, d)) in x.iter_mut().zip(&drift).enumerate() {
+                    // Number 14 is the token's property: it does not drift.
+                    if k % F != 14 {
+                        *v += d;
                     }
                 }
             }
@@ -168,7 +170,7 @@ fn main() {
     // The micro state model of configs/state/t3.toml.
     let variant = get("variant", "e_slotssm");
     let mut cfg = ModelConfig::tiny(Variant::from_name(&variant).expect("variant"))
-        .with_vocab_from(["lift the bowl and place it back"])
+        .with_vocab_from([INSTRUCTION])
         .with_state(objects + 1, 5, F);
     cfg.encoder.feature_dim = 32;
     cfg.slots.dim = 32;
@@ -207,7 +209,7 @@ fn main() {
         .with_grad_clipping(Some(GradientClippingConfig::Norm(1.0)))
         .init();
     let tok = Tokenizer::new(&cfg.text);
-    let instr = tok.encode_batch(&vec!["lift the bowl and place it back"; b], &device);
+    let instr = tok.encode_batch(&vec![INSTRUCTION; b], &device);
     let n = objects + 1;
     let batch_of =
         |feats: Vec<f32>, cats: Vec<i64>, targets: Vec<f32>, b: usize, instr| WindowBatch {
@@ -231,8 +233,8 @@ fn main() {
         .map(|a| a[..3].iter().map(|x| x.abs()).sum::<f32>() / 3.0)
         .sum::<f32>()
         / (ht.len() / 7) as f32;
-    let hinstr = tok.encode_batch(&vec!["lift the bowl and place it back"; hb], &device);
-    let held_batch = batch_of(hf, hc, ht.clone(), hb, hinstr);
+    let hinstr = tok.encode_batch(&vec![INSTRUCTION; hb], &device);
+    let held_batch = batch_of(hf, hc, ht, hb, hinstr);
     let mut rng = Rng(seed.wrapping_mul(31) ^ 0x1234);
     let start = Instant::now();
     println!(
