@@ -8,6 +8,11 @@ use clap::{Args, Parser, Subcommand, ValueEnum};
 use eval::report::{self, Results, ScalingRow};
 use eval::{EvalConfig, EvalError, Policy, RunDir};
 
+/// mimalloc as the allocator, as in `train`: the policy allocates and frees many tensor buffers
+/// per step, whose pages glibc's malloc returns to the kernel and faults in again.
+#[global_allocator]
+static ALLOCATOR: mimalloc::MiMalloc = mimalloc::MiMalloc;
+
 #[derive(Clone, Copy, PartialEq, Eq, ValueEnum)]
 enum PolicyKind {
     /// The trained model of `--run`.

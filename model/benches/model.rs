@@ -13,6 +13,12 @@
 //!    measured as peak resident memory at batch 1 over 2, 4 and 8 frames (a fresh process each),
 //!    extrapolated linearly to batch 1 and 8 over T = 32 (the GPU window).
 //!
+//! 4. A per-module breakdown of e_slotssm's training step (`BENCH_ONLY=breakdown`): each
+//!    component's forward and backward at the training shapes (B = 8, T = 16, 64², one
+//!    thread, autodiff on; inputs are leaves that need a gradient, as inside the whole graph;
+//!    backward of the sum of the outputs), beside the whole step's, to line up with the PyTorch
+//!    twin's `bench.py --breakdown`.
+//!
 //! Run: `cargo bench -p model` (add `--profile dev` to reuse the dev build: dependencies are
 //! optimised there too). Environment: `BENCH_QUICK=1` runs fewer repetitions.
 
@@ -52,7 +58,7 @@ fn train_step_ms(variant: &str, reps: usize) -> f64 {
         actions: Tensor::random([b, t, 4, 7], Distribution::Uniform(-1.0, 1.0), &device),
         frame_mask: Tensor::ones([b, t], &device),
         action_mask: None,
-        instruction: tok.encode_batch(&texts, &device),
+        instruction: tok.encode_instructions(&texts, &device),
         subgoal: None,
         pointer_target: None,
         progress: None,
@@ -295,6 +301,10 @@ fn main() {
         full_memory();
         return;
     }
+    if only.as_deref() == Some("breakdown") {
+        breakdown(if quick { 3 } else { 7 });
+        return;
+    }
     if let Some(v) = &only {
         let f = streaming_table(&[v.as_str()], step_reps).remove(0);
         println!(
@@ -366,5 +376,153 @@ fn main() {
     if std::env::var("BENCH_FULL").is_ok() {
         println!();
         full_memory();
+    }
+}
+
+/// A leaf copy of `x` that needs a gradient (an input of one component timed alone).
+fn leaf<const D: usize>(x: &Tensor<D>) -> Tensor<D> {
+    x.clone().detach().require_grad()
+}
+
+/// Forward ms and backward ms of one component (medians of `reps` after one untimed call):
+/// `f` maps its leaves to its output, whose sum is differentiated. Every forward is followed by
+/// its backward, so no graph is left behind.
+fn component<const D: usize>(reps: usize, f: impl Fn() -> Tensor<D>) -> (f64, f64) {
+    let (mut fwd, mut bwd) = (Vec::new(), Vec::new());
+    for i in 0..=reps {
+        let start = Instant::now();
+        let out = f().sum();
+        sync(out.clone());
+        let mid = Instant::now();
+        drop(out.backward());
+        let end = Instant::now();
+        if i > 0 {
+            fwd.push((mid - start).as_secs_f64() * 1e3);
+            bwd.push((end - mid).as_secs_f64() * 1e3);
+        }
+    }
+    (median(fwd), median(bwd))
+}
+
+/// Section 4: e_slotssm's training step per module (see the header).
+fn breakdown(reps: usize) {
+    use model::variants::TokenBuilder;
+    let device = Device::flex().autodiff();
+    device.seed(0);
+    let cfg = config("e_slotssm");
+    let model = PolicyModel::new(&cfg, &device).expect("model");
+    let (b, t) = (8, 16);
+    let n = b * t;
+    let tok = Tokenizer::new(&cfg.text);
+    let texts = vec![INSTRUCTION; b];
+    let images: Tensor<5> =
+        Tensor::random([b, t, 3, 64, 64], Distribution::Uniform(0.0, 1.0), &device);
+    let batch = WindowBatch {
+        obs: images.clone().into(),
+        actions: Tensor::random([b, t, 4, 7], Distribution::Uniform(-1.0, 1.0), &device),
+        frame_mask: Tensor::ones([b, t], &device),
+        action_mask: None,
+        instruction: tok.encode_instructions(&texts, &device),
+        subgoal: None,
+        pointer_target: None,
+        progress: None,
+    };
+    let TokenBuilder::SlotSsm(tokens) = &model.tokens else {
+        unreachable!("e_slotssm builds SlotSsm tokens")
+    };
+    let feats = model
+        .encoder
+        .forward(images.clone().into())
+        .expect("encoder")
+        .detach();
+    let [_, _, m, d_f] = feats.dims();
+    let (slots, _, _) = tokens
+        .core
+        .window(feats.clone(), None, None)
+        .expect("slots");
+    let slots = slots.detach();
+    let [_, _, k, d] = slots.dims();
+    let (pred, _) = tokens.slot_ssm.forward(slots.clone(), None, None);
+    let pred = pred.detach();
+    let z = slots.clone().reshape([n, k, d]);
+    let w = cfg.decoder.width;
+    let visual: Tensor<3> = Tensor::random([n, 16, w], Distribution::Normal(0.0, 1.0), &device);
+    let instr = batch
+        .instruction
+        .clone()
+        .unsqueeze_dim::<3>(1)
+        .repeat_dim(1, t)
+        .reshape([n, batch.instruction.dims()[1]]);
+    let (lang, lang_pad) = model.text.tokens(instr);
+    let lang = lang.detach();
+    let slot_decoder = tokens.core.slot_decoder.as_ref().expect("L_sa decoder");
+
+    let rows: Vec<(&str, (f64, f64))> = vec![
+        (
+            "encoder",
+            component(reps, || {
+                model
+                    .encoder
+                    .forward(images.clone().into())
+                    .expect("encoder")
+            }),
+        ),
+        (
+            "slot_attention",
+            component(reps, || {
+                tokens
+                    .core
+                    .window(leaf(&feats), None, None)
+                    .expect("slots")
+                    .0
+            }),
+        ),
+        (
+            "slotssm",
+            component(reps, || tokens.slot_ssm.forward(leaf(&slots), None, None).0),
+        ),
+        (
+            "window_head",
+            component(reps, || {
+                tokens.window_head.forward(leaf(&pred), leaf(&slots))
+            }),
+        ),
+        (
+            "relation_encoder",
+            component(reps, || {
+                tokens
+                    .core
+                    .relation
+                    .forward(leaf(&feats).reshape([n, m, d_f]), leaf(&z))
+            }),
+        ),
+        (
+            "sa_decoder(L_sa)",
+            component(reps, || slot_decoder.forward(leaf(&z)).0),
+        ),
+        (
+            "action_decoder",
+            component(reps, || {
+                model
+                    .decoder
+                    .forward(leaf(&visual), None, leaf(&lang), lang_pad.clone())
+                    .actions
+            }),
+        ),
+        (
+            "whole step",
+            component(reps, || model.forward(&batch).expect("forward").1.total),
+        ),
+    ];
+    println!("# e_slotssm training step per module: B={b}, T={t}, 64x64, flex, 1 thread, autodiff");
+    println!(
+        "(median of {reps}; backward of the sum of the module's outputs, its inputs needing gradients)"
+    );
+    println!(
+        "{:<18} {:>11} {:>12}",
+        "module", "forward ms", "backward ms"
+    );
+    for (name, (fwd, bwd)) in rows {
+        println!("{name:<18} {fwd:>11.1} {bwd:>12.1}");
     }
 }

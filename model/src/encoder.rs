@@ -7,6 +7,7 @@ use burn::nn::conv::{Conv2d, Conv2dConfig};
 use burn::nn::{Embedding, EmbeddingConfig, LayerNorm, Linear, LinearConfig, PaddingConfig2d};
 use burn::prelude::*;
 use burn::tensor::activation::relu;
+use burn::tensor::ops::PadMode;
 
 use crate::blocks::{Act, Mlp, layer_norm};
 use crate::config::{ModelConfig, Observation};
@@ -289,8 +290,15 @@ impl VisualEncoder {
         let mean = Tensor::<1>::from_floats(IMAGENET_MEAN, &device).reshape([1, 3, 1, 1]);
         let std = Tensor::<1>::from_floats(IMAGENET_STD, &device).reshape([1, 3, 1, 1]);
         let mut x = (images - mean) / std;
-        for conv in &self.convs {
-            x = relu(conv.forward(x));
+        for (i, conv) in self.convs.iter().enumerate() {
+            // The first conv reads the images, which need no gradient: as one matmul over
+            // their patches, its backward is a single matmul for the weights (Burn's conv2d
+            // computes that gradient as a convolution, 3–10× slower at these sizes).
+            x = relu(if i == 0 {
+                conv_as_matmul(conv, x)
+            } else {
+                conv.forward(x)
+            });
         }
         let x = relu(self.last.forward(x));
         let [_, d_f, gh, gw] = x.dims();
@@ -313,12 +321,90 @@ impl VisualEncoder {
     }
 }
 
+/// A 2-D convolution (groups 1, dilation 1, symmetric explicit padding) as a matmul over the
+/// input's patches (im2col: a strided view of the padded input, copied once). The same function
+/// as `conv.forward(x)` up to float rounding; meant for an input that needs no gradient (its
+/// patches' backward would be a slice-by-slice fold). Any other convolution (groups, dilation,
+/// other padding) is `conv.forward(x)`.
+///
+/// # Shapes
+/// - x: `[N, C, H, W]` → `[N, C_out, H_out, W_out]`
+pub fn conv_as_matmul(conv: &Conv2d, x: Tensor<4>) -> Tensor<4> {
+    let [n, c, h, w] = x.dims();
+    let [c_out, c_in, kh, kw] = conv.weight.dims();
+    let [sh, sw] = conv.stride;
+    let pads = match conv.padding {
+        PaddingConfig2d::Explicit(top, left, bottom, right) if top == bottom && left == right => {
+            Some([top, left])
+        }
+        PaddingConfig2d::Valid => Some([0, 0]),
+        _ => None,
+    };
+    let Some([ph, pw]) = pads.filter(|_| c == c_in && conv.groups == 1 && conv.dilation == [1, 1])
+    else {
+        return conv.forward(x);
+    };
+    let (ho, wo) = ((h + 2 * ph - kh) / sh + 1, (w + 2 * pw - kw) / sw + 1);
+    let padded = x.pad([(ph, ph), (pw, pw)], PadMode::Constant(0.0)); // [N, C, H+2p, W+2p]
+    let patches = padded
+        .unfold::<5, _>(2, kh, sh) // [N, C, Ho, W+2p, kh]
+        .unfold::<6, _>(3, kw, sw) // [N, C, Ho, Wo, kh, kw]
+        .permute([0, 2, 3, 1, 4, 5])
+        .reshape([n * ho * wo, c * kh * kw]);
+    let weight = conv.weight.val().reshape([c_out, c * kh * kw]).transpose();
+    let mut y = patches.matmul(weight); // [N·Ho·Wo, C_out]
+    if let Some(b) = &conv.bias {
+        y = y + b.val().reshape([1, c_out]);
+    }
+    y.reshape([n, ho, wo, c_out]).permute([0, 3, 1, 2])
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
     use crate::config::Variant;
     use crate::test_device;
     use burn::tensor::Distribution;
+
+    #[test]
+    fn conv_as_matmul_equals_conv2d_with_gradients() {
+        let (_guard, device) = crate::test_autodiff_device();
+        for (c_in, side, k, stride, pad) in [(3, 16, 5, 2, 2), (4, 9, 3, 1, 1), (2, 8, 3, 2, 0)] {
+            let padding = if pad == 0 {
+                PaddingConfig2d::Valid
+            } else {
+                PaddingConfig2d::Explicit(pad, pad, pad, pad)
+            };
+            let conv = Conv2dConfig::new([c_in, 6], [k, k])
+                .with_stride([stride, stride])
+                .with_padding(padding)
+                .init(&device);
+            let x = Tensor::<4>::random([2, c_in, side, side], Distribution::Default, &device);
+            let a = conv_as_matmul(&conv, x.clone());
+            let b = conv.forward(x);
+            assert_eq!(a.dims(), b.dims());
+            let diff = (a.clone() - b.clone()).abs().max().into_scalar::<f32>();
+            assert!(diff < 1e-5, "outputs differ by {diff}");
+            let ga = a.powi_scalar(2).sum().backward();
+            let gb = b.powi_scalar(2).sum().backward();
+            let w = |g| conv.weight.val().grad(g).expect("weight gradient");
+            let bias = |g| {
+                conv.bias
+                    .as_ref()
+                    .unwrap()
+                    .val()
+                    .grad(g)
+                    .expect("bias gradient")
+            };
+            let rel = |p: Tensor<4>, q: Tensor<4>| {
+                let scale = q.clone().abs().max().into_scalar::<f32>();
+                (p - q).abs().max().into_scalar::<f32>() / scale
+            };
+            assert!(rel(w(&ga), w(&gb)) < 1e-5, "weight gradients differ");
+            let db = (bias(&ga) - bias(&gb)).abs().max().into_scalar::<f32>();
+            assert!(db < 1e-3, "bias gradients differ by {db}");
+        }
+    }
 
     #[test]
     fn tiny_encoder_output_shape() {

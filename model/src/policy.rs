@@ -526,6 +526,55 @@ mod tests {
         }
     }
 
+    #[test]
+    fn instructions_cut_to_their_longest_give_the_padded_outputs() {
+        let (_guard, device) = test_device();
+        let tok = Tokenizer::new(&micro("e_slotssm").text);
+        let cut = tok.encode_instructions(&INSTRUCTIONS, &device);
+        // "put the bowl on the plate": 6 words; the other 4.
+        assert_eq!(cut.dims(), [2, 6]);
+        assert_eq!(
+            tok.encode_instructions(&["", ""], &device).dims(),
+            [2, 1],
+            "at least one column"
+        );
+        let ids = |t: Tensor<2, Int>| t.into_data().try_to_vec_as::<i64>().unwrap();
+        let full = ids(tok.encode_batch(&INSTRUCTIONS, &device));
+        assert_eq!(ids(cut), [&full[..6], &full[8..14]].concat());
+        for (variant, film) in [("e_slotssm", true), ("slotvla_h3", false), ("dense", false)] {
+            let mut cfg = micro(variant);
+            cfg.decoder.film = film;
+            let mut model = PolicyModel::new(&cfg, &device).unwrap();
+            if let Some(film) = model.decoder.film.as_mut() {
+                // FiLM starts at zero: give it weights so that the pooled language matters.
+                let w = film
+                    .weight
+                    .val()
+                    .random_like(Distribution::Normal(0.0, 0.1));
+                film.weight = burn::module::Param::from_tensor(w);
+            }
+            check_cut(&model, &mut batch(&cfg, 2, 3, &device), &tok, &device);
+        }
+    }
+
+    fn check_cut(model: &PolicyModel, b: &mut WindowBatch, tok: &Tokenizer, device: &Device) {
+        let texts: Vec<&str> = (0..b.frame_mask.dims()[0])
+            .map(|i| INSTRUCTIONS[i % 2])
+            .collect();
+        b.instruction = tok.encode_batch(&texts, device);
+        let (padded, lp) = model.forward(b).unwrap();
+        b.instruction = tok.encode_instructions(&texts, device);
+        assert!(b.instruction.dims()[1] < model.config.text.max_len);
+        let (cut, lc) = model.forward(b).unwrap();
+        let diff = (padded.actions - cut.actions)
+            .abs()
+            .max()
+            .into_scalar::<f32>();
+        assert!(diff < 1e-5, "actions differ by {diff}");
+        let dl = (lp.total - lc.total).abs().into_scalar::<f32>();
+        assert!(dl < 1e-5, "losses differ by {dl}");
+    }
+
     /// λ_tc L_tc + λ_win L_win + λ_sa L_sa of the terms the variant computes.
     fn slot_terms(losses: &Losses, cfg: &ModelConfig) -> f32 {
         [
@@ -1382,9 +1431,11 @@ mod tests {
         let cfg = micro("e_slotssm");
         let model = PolicyModel::new(&cfg, &device).unwrap();
         let x = batch(&cfg, 2, 4, &device);
-        let (model, initial, last, steps) = fit_one_batch(model, &x, 400, 1e-3, 0.1);
+        // Fitted to 5 % of the first L_act, so that the streamed error of one sample (the
+        // batch's mean hides how its two samples split) stays below 10 %.
+        let (model, initial, last, steps) = fit_one_batch(model, &x, 400, 1e-3, 0.05);
         eprintln!("overfit: L_act {initial:.4} → {last:.4} in {steps} steps");
-        assert!(last < 0.1 * initial, "L_act {initial} → {last}");
+        assert!(last < 0.05 * initial, "L_act {initial} → {last}");
 
         // The trained weights act through the streaming policy too (autodiff device given).
         let plain = Device::flex();

@@ -62,6 +62,26 @@ impl Tokenizer {
         let data: Vec<i64> = texts.iter().flat_map(|t| self.encode(t)).collect();
         Tensor::from_data(TensorData::new(data, [texts.len(), self.max_len]), device)
     }
+
+    /// Token ids of instructions, cut after the last column that is padding in every row (at
+    /// least one column): the decoder masks padded language tokens, so the columns dropped change
+    /// no output, and its sequence is not padded to `max_len` (with T3's nine words 53 tokens
+    /// instead of 76 in the tiny decoder).
+    ///
+    /// # Shapes
+    /// - output: `[texts.len(), L]`, 1 ≤ L ≤ max_len
+    pub fn encode_instructions(&self, texts: &[&str], device: &Device) -> Tensor<2, Int> {
+        let rows: Vec<Vec<i64>> = texts.iter().map(|t| self.encode(t)).collect();
+        let pad = crate::text::PAD;
+        let len = rows
+            .iter()
+            .map(|r| r.iter().rposition(|&id| id != pad).map_or(0, |i| i + 1))
+            .max()
+            .unwrap_or(0)
+            .max(1);
+        let data: Vec<i64> = rows.iter().flat_map(|r| r[..len].iter().copied()).collect();
+        Tensor::from_data(TensorData::new(data, [texts.len(), len]), device)
+    }
 }
 
 /// Which subgoal the model is given with each frame.
@@ -356,7 +376,9 @@ impl Processor {
     /// - output: image `[1, 3, H, W]`, instruction `[1, L_txt]`, subgoal `[1, G, L_sg]`
     ///   (G = 1 pending text, N state tokens' labels, or J + 1 with boxes `[1, J, 4]`)
     pub fn step(&self, obs: &StepObservation, device: &Device) -> Result<StepInput> {
-        let instruction = self.tokenizer.encode_batch(&[obs.instruction], device);
+        let instruction = self
+            .tokenizer
+            .encode_instructions(&[obs.instruction], device);
         if self.reads_state() {
             let t = self.state_tokens(obs.objects, &obs.state, obs.goal, obs.seed)?;
             let n = t.categories.len();
@@ -608,7 +630,7 @@ impl Processor {
                 TensorData::new(action_mask, [b, t, ha, 7]),
                 device,
             )),
-            instruction: self.tokenizer.encode_batch(&instructions, device),
+            instruction: self.tokenizer.encode_instructions(&instructions, device),
             subgoal,
             pointer_target,
             progress,
