@@ -7,6 +7,11 @@
 #
 #   bash scripts/bench_train.sh [CONFIG] [STEPS]
 #
+# With the twin present, ROUNDS (default 3) more pairs follow — ours at 2 threads with 2 replicas,
+# then the twin at 2 threads, alternating — and the median of their ratios is printed: on a
+# shared machine the speed drifts by 10–20 % within minutes, which one pair cannot tell from a
+# real difference.
+#
 # Environment: TORCH_TWIN (the twin's folder, default ../shared/tools/torch_twin), TORCH_TWIN_PYTHON
 # (default ~/.venvs/torch_twin/bin/python). CONFIG defaults to configs/t3.toml, whose dataset is
 # generated first when missing (100 expert episodes). Build: cargo build --release -p train.
@@ -31,6 +36,12 @@ if [ -x "$py" ] && [ -f "$twin/bench.py" ]; then
   echo "== PyTorch twin: bench.py --steps 15 --warmup 3 --threads 1,2 --skip-stream --set sa_dec_hidden=64" >&2
   (cd "$twin" && "$py" bench.py --steps 15 --warmup 3 --threads 1,2 --skip-stream \
     --set sa_dec_hidden=64) >"$out/twin.json"
+  for r in $(seq 1 "${ROUNDS:-3}"); do
+    echo "== round $r: ours (2 threads, 2 replicas), then the twin (2 threads)" >&2
+    "$bin" "$config" --bench "$steps" --threads 2 --quiet --json --set train.replicas=2 >"$out/round_ours_$r.json"
+    (cd "$twin" && "$py" bench.py --steps 15 --warmup 3 --threads 2 --skip-stream \
+      --set sa_dec_hidden=64) >"$out/round_twin_$r.json"
+  done
 else
   echo "(no PyTorch twin at $twin with $py: ours only)" >&2
 fi
@@ -60,4 +71,15 @@ print(f"\nloader alone: {o['loader_windows_per_s']:.0f} windows/s vs the trainer
       f"({o['loader_windows_per_s'] / o['trainer_windows_per_s']:.0f}×)")
 if twin:
     print(f"twin: torch {twin['torch_version']}, {twin['params']} parameters")
+    rounds = sorted(f for f in os.listdir(out) if f.startswith("round_ours_"))
+    ratios = []
+    for f in rounds:
+        r = f.removeprefix("round_ours_").removesuffix(".json")
+        o = json.load(open(f"{out}/{f}"))["step_ms"]
+        t = json.load(open(f"{out}/round_twin_{r}.json"))["train_step_ms_2threads"]
+        ratios.append(o / t)
+        print(f"round {r}: ours {o:.0f} ms (2 replicas), twin {t:.0f} ms (2 threads): {o / t:.2f}")
+    if ratios:
+        ratios.sort()
+        print(f"median ratio over {len(ratios)} alternating rounds: {ratios[len(ratios) // 2]:.2f}")
 EOF

@@ -119,6 +119,26 @@ impl SelfAttnBlock {
         }
         x + self.attn.forward(input).context
     }
+
+    /// The block's outputs at some of its rows only: `rows` (rows of `x`) attend to every row of
+    /// `x`, as in [`SelfAttnBlock::forward`], whose outputs at those rows these equal.
+    ///
+    /// # Shapes
+    /// - x: `[N, S, d]`; rows: `[N, R, d]`; pad: `[N, S]`, true = masked key
+    /// - output: `[N, R, d]`
+    pub fn forward_rows(
+        &self,
+        x: Tensor<3>,
+        rows: Tensor<3>,
+        pad: Option<Tensor<2, Bool>>,
+    ) -> Tensor<3> {
+        let h = self.norm.forward(x);
+        let mut input = MhaInput::new(self.norm.forward(rows.clone()), h.clone(), h);
+        if let Some(pad) = pad {
+            input = input.mask_pad(pad);
+        }
+        rows + self.attn.forward(input).context
+    }
 }
 
 /// Pre-LN residual cross-attention: `q + MHA(LN_q(q), LN_kv(kv))`.

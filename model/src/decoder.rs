@@ -97,8 +97,9 @@ pub struct DecoderOutput {
     pub logits: Option<Tensor<4>>,
     /// The normed outputs of the action queries `[N, Q, D_dec]`.
     pub queries: Tensor<3>,
-    /// The last layer's outputs at the visual tokens `[N, V, D_dec]` (before the final norm).
-    pub visual: Tensor<3>,
+    /// The last layer's outputs at the visual tokens `[N, V, D_dec]` (before the final norm;
+    /// computed only for a decoder built with `pointer`, which reads them).
+    pub visual: Option<Tensor<3>>,
     /// The pointer head's weights over the state tokens `[N, H_a, K]` (set by the policy when
     /// it has the head; see [`PointerHead::weights`]).
     pub pointer: Option<Tensor<3>>,
@@ -204,6 +205,9 @@ pub struct ActionDecoder {
     pub step_queries: bool,
     /// FiLM of the visual tokens from the pooled instruction `[D_dec, 2·D_dec]` (γ | β).
     pub film: Option<Linear>,
+    /// Whether the last layer's outputs at the visual tokens are kept (for the pointer head);
+    /// else the last layer computes the query rows only.
+    pub keep_visual: bool,
 }
 
 impl ActionDecoder {
@@ -246,6 +250,7 @@ impl ActionDecoder {
                     .with_initializer(Initializer::Zeros)
                     .init(device)
             }),
+            keep_visual: config.pointer,
         }
     }
 
@@ -305,12 +310,39 @@ impl ActionDecoder {
         let query_pad = Tensor::<2>::zeros([n, q], &device).equal_elem(1.0);
         let pad = Tensor::cat(vec![visual_pad, lang_pad, query_pad], 1);
         let mut x = x;
-        for layer in &self.layers {
-            x = layer.attn.forward(x, Some(pad.clone()));
-            x = layer.ffn.forward(x);
+        let (mut hidden, mut out) = (None, None);
+        for (i, layer) in self.layers.iter().enumerate() {
+            if i + 1 < self.layers.len() {
+                x = layer.attn.forward(x, Some(pad.clone()));
+                x = layer.ffn.forward(x);
+                continue;
+            }
+            // The last layer: only the rows read after it (the queries, and the visual tokens
+            // for the pointer head) — the language rows' outputs would be dropped.
+            let queries = x.clone().narrow(1, v + l_txt, q);
+            let rows = if self.keep_visual {
+                Tensor::cat(vec![x.clone().narrow(1, 0, v), queries], 1)
+            } else {
+                queries
+            };
+            let y = layer
+                .ffn
+                .forward(layer.attn.forward_rows(x.clone(), rows, Some(pad.clone())));
+            if self.keep_visual {
+                hidden = Some(y.clone().narrow(1, 0, v)); // [N, V, D_dec]
+                out = Some(y.narrow(1, v, q));
+            } else {
+                out = Some(y);
+            }
         }
-        let hidden = x.clone().narrow(1, 0, v); // [N, V, D_dec]
-        let out = self.norm.forward(x.narrow(1, v + l_txt, q)); // [N, Q, D_dec]
+        let out = match out {
+            Some(out) => out,
+            None => {
+                hidden = self.keep_visual.then(|| x.clone().narrow(1, 0, v));
+                x.narrow(1, v + l_txt, q)
+            }
+        };
+        let out = self.norm.forward(out); // [N, Q, D_dec]
         let queries_out = out.clone();
         if let Some(head) = &self.l1 {
             let per_step = if self.step_queries { w } else { a * w };
@@ -398,6 +430,74 @@ mod tests {
             .unwrap();
         for (b, &c) in back.iter().zip(&want) {
             assert!((b - class_to_action(c as usize)).abs() < 1e-6);
+        }
+    }
+
+    #[test]
+    fn last_layer_on_the_read_rows_equals_every_row() {
+        let (_guard, device) = test_device();
+        let vis = Tensor::<3>::random([3, 5, 16], Distribution::Default, &device);
+        let lang = Tensor::<3>::random([3, 6, 16], Distribution::Default, &device);
+        // Some language keys padded, as for instructions of different lengths.
+        let pad = Tensor::<2, Bool>::from_data(
+            TensorData::new([false, false, false, false, true, true].repeat(3), [3, 6]),
+            &device,
+        );
+        for pointer in [false, true] {
+            let c = DecoderConfig {
+                layers: 2,
+                pointer,
+                ..cfg(ActionHead::L1)
+            };
+            let dec = ActionDecoder::new(&c, &device);
+            let out = dec.forward(vis.clone(), None, lang.clone(), pad.clone());
+            // Every row through every layer, as a plain encoder stack computes it.
+            let seg = dec.segment.val();
+            let q = dec.queries.dims()[0];
+            let x = Tensor::cat(
+                vec![
+                    vis.clone(),
+                    lang.clone() + seg.clone().narrow(0, 0, 1).unsqueeze_dim::<3>(0),
+                    (dec.queries.val() + seg.narrow(0, 1, 1))
+                        .unsqueeze_dim::<3>(0)
+                        .repeat_dim(0, 3),
+                ],
+                1,
+            );
+            let full_pad = Tensor::cat(
+                vec![
+                    Tensor::<2>::zeros([3, 5], &device).equal_elem(1.0),
+                    pad.clone(),
+                    Tensor::<2>::zeros([3, q], &device).equal_elem(1.0),
+                ],
+                1,
+            );
+            let mut x = x;
+            for layer in &dec.layers {
+                x = layer
+                    .ffn
+                    .forward(layer.attn.forward(x, Some(full_pad.clone())));
+            }
+            let want = dec.norm.forward(x.clone().narrow(1, 11, q));
+            let diff = (out.queries.clone() - want)
+                .abs()
+                .max()
+                .into_scalar::<f32>();
+            assert!(diff < 1e-5, "query outputs differ by {diff}");
+            match out.visual {
+                Some(visual) => {
+                    assert!(pointer);
+                    let d = (visual - x.narrow(1, 0, 5))
+                        .abs()
+                        .max()
+                        .into_scalar::<f32>();
+                    assert!(d < 1e-5, "visual outputs differ by {d}");
+                }
+                None => assert!(
+                    !pointer,
+                    "the pointer head's decoder keeps its visual outputs"
+                ),
+            }
         }
     }
 

@@ -349,14 +349,16 @@ pub fn conv_as_matmul(conv: &Conv2d, x: Tensor<4>) -> Tensor<4> {
     let patches = padded
         .unfold::<5, _>(2, kh, sh) // [N, C, Ho, W+2p, kh]
         .unfold::<6, _>(3, kw, sw) // [N, C, Ho, Wo, kh, kw]
-        .permute([0, 2, 3, 1, 4, 5])
-        .reshape([n * ho * wo, c * kh * kw]);
-    let weight = conv.weight.val().reshape([c_out, c * kh * kw]).transpose();
-    let mut y = patches.matmul(weight); // [N·Ho·Wo, C_out]
+        .permute([0, 1, 4, 5, 2, 3])
+        .reshape([n, c * kh * kw, ho * wo]);
+    // W [C_out, C·kh·kw] times each frame's patches: the output comes out contiguous in NCHW
+    // order, as the next conv reads it.
+    let weight = conv.weight.val().reshape([1, c_out, c * kh * kw]);
+    let mut y = weight.matmul(patches); // [N, C_out, Ho·Wo]
     if let Some(b) = &conv.bias {
-        y = y + b.val().reshape([1, c_out]);
+        y = y + b.val().reshape([1, c_out, 1]);
     }
-    y.reshape([n, ho, wo, c_out]).permute([0, 3, 1, 2])
+    y.reshape([n, c_out, ho, wo])
 }
 
 #[cfg(test)]

@@ -216,9 +216,14 @@ impl PolicyModel {
                     "the pointer head reads object state but was given none".into(),
                 ));
             };
-            let [n, v, _] = out.visual.dims();
+            let Some(visual) = out.visual.as_ref() else {
+                return Err(ModelError::Input(
+                    "the decoder kept no visual outputs for the pointer head".into(),
+                ));
+            };
+            let [n, v, _] = visual.dims();
             let [_, k, _] = features.dims();
-            let tokens = out.visual.clone().narrow(1, v - k, k);
+            let tokens = visual.clone().narrow(1, v - k, k);
             debug_assert_eq!(categories.dims(), [n, k]);
             let pad = categories.equal_elem(crate::io::state::PAD);
             let weights = pointer.weights(out.queries.clone(), tokens, features.clone(), pad);
