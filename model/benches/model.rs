@@ -44,25 +44,31 @@ fn sync(t: Tensor<1>) -> f32 {
     t.into_scalar::<f32>()
 }
 
+/// A training batch of `images` `[B, T, 3, 64, 64]`: random actions in [−1, 1], every frame valid,
+/// the bench instruction for every window.
+fn window_batch(cfg: &ModelConfig, images: Tensor<5>, device: &Device) -> WindowBatch {
+    let [b, t, _, _, _] = images.dims();
+    let texts = vec![INSTRUCTION; b];
+    WindowBatch {
+        obs: images.into(),
+        actions: Tensor::random([b, t, 4, 7], Distribution::Uniform(-1.0, 1.0), device),
+        frame_mask: Tensor::ones([b, t], device),
+        action_mask: None,
+        instruction: Tokenizer::new(&cfg.text).encode_instructions(&texts, device),
+        subgoal: None,
+        pointer_target: None,
+        progress: None,
+    }
+}
+
 /// Forward + backward of one window batch, ms (median of `reps`).
 fn train_step_ms(variant: &str, reps: usize) -> f64 {
     let device = Device::flex().autodiff();
     device.seed(0);
     let cfg = config(variant);
     let model = PolicyModel::new(&cfg, &device).expect("model");
-    let (b, t) = (8, 16);
-    let tok = Tokenizer::new(&cfg.text);
-    let texts = vec![INSTRUCTION; b];
-    let batch = WindowBatch {
-        obs: Tensor::random([b, t, 3, 64, 64], Distribution::Uniform(0.0, 1.0), &device).into(),
-        actions: Tensor::random([b, t, 4, 7], Distribution::Uniform(-1.0, 1.0), &device),
-        frame_mask: Tensor::ones([b, t], &device),
-        action_mask: None,
-        instruction: tok.encode_instructions(&texts, &device),
-        subgoal: None,
-        pointer_target: None,
-        progress: None,
-    };
+    let images = Tensor::random([8, 16, 3, 64, 64], Distribution::Uniform(0.0, 1.0), &device);
+    let batch = window_batch(&cfg, images, &device);
     let mut times = Vec::new();
     for i in 0..=reps {
         let start = Instant::now();
@@ -413,20 +419,9 @@ fn breakdown(reps: usize) {
     let model = PolicyModel::new(&cfg, &device).expect("model");
     let (b, t) = (8, 16);
     let n = b * t;
-    let tok = Tokenizer::new(&cfg.text);
-    let texts = vec![INSTRUCTION; b];
     let images: Tensor<5> =
         Tensor::random([b, t, 3, 64, 64], Distribution::Uniform(0.0, 1.0), &device);
-    let batch = WindowBatch {
-        obs: images.clone().into(),
-        actions: Tensor::random([b, t, 4, 7], Distribution::Uniform(-1.0, 1.0), &device),
-        frame_mask: Tensor::ones([b, t], &device),
-        action_mask: None,
-        instruction: tok.encode_instructions(&texts, &device),
-        subgoal: None,
-        pointer_target: None,
-        progress: None,
-    };
+    let batch = window_batch(&cfg, images.clone(), &device);
     let TokenBuilder::SlotSsm(tokens) = &model.tokens else {
         unreachable!("e_slotssm builds SlotSsm tokens")
     };
