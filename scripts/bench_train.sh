@@ -9,7 +9,7 @@
 #
 # With the twin present, ROUNDS (default 3) more pairs follow — ours at 2 threads with 2 replicas,
 # then the twin at 2 threads, alternating — and the median of their ratios is printed: on a
-# shared machine the speed drifts by 10–20 % within minutes, which one pair cannot tell from a
+# shared machine the speed drifts by 10–40 % within minutes, which one pair cannot tell from a
 # real difference.
 #
 # Environment: TORCH_TWIN (the twin's folder, default ../shared/tools/torch_twin), TORCH_TWIN_PYTHON
@@ -25,22 +25,28 @@ bin=target/release/train
 [ -x "$bin" ] || cargo build -q --release -p train
 out=$(mktemp -d)
 trap 'rm -rf "$out"' EXIT
+# The twin's training step at the thread counts $1 (e.g. 1,2), one JSON line.
+twin_bench() {
+  (cd "$twin" && "$py" bench.py --steps 15 --warmup 3 --threads "$1" --skip-stream --set sa_dec_hidden=64)
+}
+# Ours at 2 threads with two data-parallel replicas, one JSON line.
+ours_2r() {
+  "$bin" "$config" --bench "$steps" --threads 2 --quiet --json --set train.replicas=2
+}
 
 for n in 1 2; do
   echo "== ours, $n thread(s): $bin $config --bench $steps --threads $n" >&2
   "$bin" "$config" --bench "$steps" --threads "$n" --quiet --json >"$out/ours_$n.json"
 done
 echo "== ours, 2 threads, 2 replicas: $bin $config --bench $steps --threads 2 --set train.replicas=2" >&2
-"$bin" "$config" --bench "$steps" --threads 2 --quiet --json --set train.replicas=2 >"$out/ours_2r.json"
+ours_2r >"$out/ours_2r.json"
 if [ -x "$py" ] && [ -f "$twin/bench.py" ]; then
   echo "== PyTorch twin: bench.py --steps 15 --warmup 3 --threads 1,2 --skip-stream --set sa_dec_hidden=64" >&2
-  (cd "$twin" && "$py" bench.py --steps 15 --warmup 3 --threads 1,2 --skip-stream \
-    --set sa_dec_hidden=64) >"$out/twin.json"
+  twin_bench 1,2 >"$out/twin.json"
   for r in $(seq 1 "${ROUNDS:-3}"); do
     echo "== round $r: ours (2 threads, 2 replicas), then the twin (2 threads)" >&2
-    "$bin" "$config" --bench "$steps" --threads 2 --quiet --json --set train.replicas=2 >"$out/round_ours_$r.json"
-    (cd "$twin" && "$py" bench.py --steps 15 --warmup 3 --threads 2 --skip-stream \
-      --set sa_dec_hidden=64) >"$out/round_twin_$r.json"
+    ours_2r >"$out/round_ours_$r.json"
+    twin_bench 2 >"$out/round_twin_$r.json"
   done
 else
   echo "(no PyTorch twin at $twin with $py: ours only)" >&2

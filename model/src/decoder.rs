@@ -309,38 +309,33 @@ impl ActionDecoder {
             visual_pad.unwrap_or_else(|| Tensor::<2>::zeros([n, v], &device).equal_elem(1.0));
         let query_pad = Tensor::<2>::zeros([n, q], &device).equal_elem(1.0);
         let pad = Tensor::cat(vec![visual_pad, lang_pad, query_pad], 1);
+        let (last, rest) = match self.layers.split_last() {
+            Some((last, rest)) => (Some(last), rest),
+            None => (None, &self.layers[..]),
+        };
         let mut x = x;
-        let (mut hidden, mut out) = (None, None);
-        for (i, layer) in self.layers.iter().enumerate() {
-            if i + 1 < self.layers.len() {
-                x = layer.attn.forward(x, Some(pad.clone()));
-                x = layer.ffn.forward(x);
-                continue;
-            }
-            // The last layer: only the rows read after it (the queries, and the visual tokens
-            // for the pointer head) — the language rows' outputs would be dropped.
-            let queries = x.clone().narrow(1, v + l_txt, q);
-            let rows = if self.keep_visual {
-                Tensor::cat(vec![x.clone().narrow(1, 0, v), queries], 1)
-            } else {
-                queries
-            };
-            let y = layer
-                .ffn
-                .forward(layer.attn.forward_rows(x.clone(), rows, Some(pad.clone())));
-            if self.keep_visual {
-                hidden = Some(y.clone().narrow(1, 0, v)); // [N, V, D_dec]
-                out = Some(y.narrow(1, v, q));
-            } else {
-                out = Some(y);
-            }
+        for layer in rest {
+            x = layer.attn.forward(x, Some(pad.clone()));
+            x = layer.ffn.forward(x);
         }
-        let out = match out {
-            Some(out) => out,
-            None => {
-                hidden = self.keep_visual.then(|| x.clone().narrow(1, 0, v));
-                x.narrow(1, v + l_txt, q)
-            }
+        // The rows read after the decoder: the queries, and the visual tokens for the pointer
+        // head. The last layer computes only those (the language rows' outputs would be dropped).
+        let queries = x.clone().narrow(1, v + l_txt, q);
+        let read = if self.keep_visual {
+            Tensor::cat(vec![x.clone().narrow(1, 0, v), queries], 1)
+        } else {
+            queries
+        };
+        let read = match last {
+            Some(layer) => layer
+                .ffn
+                .forward(layer.attn.forward_rows(x, read, Some(pad.clone()))),
+            None => read,
+        };
+        let (hidden, out) = if self.keep_visual {
+            (Some(read.clone().narrow(1, 0, v)), read.narrow(1, v, q)) // [N, V, D_dec], [N, Q, D_dec]
+        } else {
+            (None, read)
         };
         let out = self.norm.forward(out); // [N, Q, D_dec]
         let queries_out = out.clone();
