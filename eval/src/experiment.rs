@@ -100,6 +100,51 @@ pub struct RunSpec {
     pub seeds: Vec<u64>,
 }
 
+/// Which of an experiment's runs to train and evaluate now (`eval experiment --obs/--suite`);
+/// `None` admits every value.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct Only {
+    /// Observation mode (`state`, `pixels`).
+    pub obs: Option<String>,
+    /// Suite, as a run's `suite` names it.
+    pub suite: Option<String>,
+}
+
+impl Only {
+    /// Whether the runs of `spec` are to be trained and evaluated.
+    pub fn admits(&self, spec: &RunSpec) -> bool {
+        self.obs.as_ref().is_none_or(|o| *o == spec.obs)
+            && self.suite.as_ref().is_none_or(|s| *s == spec.suite)
+    }
+
+    /// An error naming `file` when no run of `x` is admitted (a misspelt mode or suite).
+    pub fn check(&self, x: &Experiment, file: &Path) -> Result<(), EvalError> {
+        if self.obs.is_none() && self.suite.is_none() || x.runs.iter().any(|r| self.admits(r)) {
+            return Ok(());
+        }
+        let mut modes: Vec<&str> = x.runs.iter().map(|r| r.obs.as_str()).collect();
+        let mut suites: Vec<&str> = x.runs.iter().map(|r| r.suite.as_str()).collect();
+        modes.sort_unstable();
+        modes.dedup();
+        suites.sort_unstable();
+        suites.dedup();
+        Err(EvalError::Input {
+            path: file.to_path_buf(),
+            message: format!(
+                "no run has{}{} (modes: {}; suites: {})",
+                self.obs
+                    .as_ref()
+                    .map_or(String::new(), |o| format!(" obs = \"{o}\"")),
+                self.suite
+                    .as_ref()
+                    .map_or(String::new(), |s| format!(" suite = \"{s}\"")),
+                modes.join(", "),
+                suites.join(", ")
+            ),
+        })
+    }
+}
+
 /// One run of an experiment's plan.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Planned<'a> {
@@ -1279,6 +1324,35 @@ mod tests {
         let p = dir.path().join("x.toml");
         std::fs::write(&p, text).unwrap();
         (dir, p)
+    }
+
+    #[test]
+    fn only_admits_its_mode_and_suite_and_names_what_exists() {
+        let (_dir, p) = experiment_file(
+            "name = \"paper\"\nout = \"docs\"\n[[runs]]\nobs = \"state\"\nsuite = \"libero_mem\"\nconfig = \"c.toml\"\nvariants = [\"e_slotssm\"]\n[[runs]]\nobs = \"pixels\"\nsuite = \"t1\"\nconfig = \"c.toml\"\nvariants = [\"e_slotssm\"]\n",
+        );
+        let x = Experiment::load(&p).unwrap();
+        let only = |obs: Option<&str>, suite: Option<&str>| Only {
+            obs: obs.map(String::from),
+            suite: suite.map(String::from),
+        };
+        let admitted = |o: &Only| -> Vec<bool> { x.runs.iter().map(|r| o.admits(r)).collect() };
+        assert_eq!(admitted(&Only::default()), [true, true]);
+        assert_eq!(admitted(&only(Some("state"), None)), [true, false]);
+        assert_eq!(admitted(&only(None, Some("t1"))), [false, true]);
+        assert_eq!(admitted(&only(Some("state"), Some("t1"))), [false, false]);
+        assert!(only(Some("pixels"), None).check(&x, &p).is_ok());
+        let err = only(Some("state"), Some("t1"))
+            .check(&x, &p)
+            .unwrap_err()
+            .to_string();
+        assert!(err.starts_with(&p.display().to_string()), "{err}");
+        assert!(
+            err.ends_with(
+                "no run has obs = \"state\" suite = \"t1\" (modes: pixels, state; suites: libero_mem, t1)"
+            ),
+            "{err}"
+        );
     }
 
     #[test]

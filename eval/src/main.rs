@@ -99,6 +99,14 @@ enum Command {
         /// whose dataset is not recorded yet trains alone first, as it generates the dataset.
         #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u64).range(1..))]
         jobs: u64,
+        /// Train and evaluate only the runs of this observation mode (`state`, `pixels`); the
+        /// tables keep every run of the file evaluated so far.
+        #[arg(long)]
+        obs: Option<String>,
+        /// Train and evaluate only the runs of this suite (as the file's `suite`, e.g.
+        /// `libero_mem`); the tables keep every run of the file evaluated so far.
+        #[arg(long)]
+        suite: Option<String>,
     },
     /// Join the results of the shards of one evaluation (`eval --shard I/N`, e.g. a Slurm array
     /// job's tasks) into the unsharded run's results.{md,json,csv}.
@@ -257,7 +265,15 @@ fn main() -> ExitCode {
             tables_only,
             quiet,
             jobs,
-        }) => experiment(&file, tables_only, quiet, jobs as usize),
+            obs,
+            suite,
+        }) => experiment(
+            &file,
+            tables_only,
+            quiet,
+            jobs as usize,
+            &eval::experiment::Only { obs, suite },
+        ),
         None => evaluate(&cli.eval),
     };
     match result {
@@ -700,10 +716,12 @@ fn experiment(
     tables_only: bool,
     quiet: bool,
     jobs: usize,
+    only: &eval::experiment::Only,
 ) -> anyhow::Result<()> {
     use eval::experiment::{self as exp, Experiment};
     let x = Experiment::load(file)?;
     let plan = x.plan();
+    only.check(&x, file)?;
     let bar = if quiet {
         indicatif::ProgressBar::hidden()
     } else {
@@ -773,7 +791,7 @@ fn experiment(
         let todo: Vec<&exp::Planned> = plan
             .iter()
             .zip(&evaluated)
-            .filter(|(_, r)| r.is_none())
+            .filter(|(p, r)| r.is_none() && only.admits(p.spec))
             .map(|(p, _)| p)
             .collect();
         let (alone, side_by_side) = exp::training_waves(&todo, exp::dataset_ready);
@@ -804,7 +822,7 @@ fn experiment(
             bar.inc(1);
             continue;
         }
-        if tables_only {
+        if tables_only || !only.admits(p.spec) {
             bar.inc(1);
             continue;
         }
