@@ -117,17 +117,14 @@ impl Only {
             && self.suite.as_ref().is_none_or(|s| *s == spec.suite)
     }
 
-    /// An error naming `file` when no run of `x` is admitted (a misspelt mode or suite).
+    /// An error naming `file` when no run of `x` is admitted (a misspelt mode or suite), listing
+    /// the file's modes and suites in file order.
     pub fn check(&self, x: &Experiment, file: &Path) -> Result<(), EvalError> {
         if self.obs.is_none() && self.suite.is_none() || x.runs.iter().any(|r| self.admits(r)) {
             return Ok(());
         }
-        let mut modes: Vec<&str> = x.runs.iter().map(|r| r.obs.as_str()).collect();
-        let mut suites: Vec<&str> = x.runs.iter().map(|r| r.suite.as_str()).collect();
-        modes.sort_unstable();
-        modes.dedup();
-        suites.sort_unstable();
-        suites.dedup();
+        let modes = report::first_seen(x.runs.iter().map(|r| r.obs.as_str()));
+        let suites = report::first_seen(x.runs.iter().map(|r| r.suite.as_str()));
         Err(EvalError::Input {
             path: file.to_path_buf(),
             message: format!(
@@ -1349,7 +1346,7 @@ mod tests {
         assert!(err.starts_with(&p.display().to_string()), "{err}");
         assert!(
             err.ends_with(
-                "no run has obs = \"state\" suite = \"t1\" (modes: pixels, state; suites: libero_mem, t1)"
+                "no run has obs = \"state\" suite = \"t1\" (modes: state, pixels; suites: libero_mem, t1)"
             ),
             "{err}"
         );
