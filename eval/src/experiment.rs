@@ -302,8 +302,9 @@ pub fn train_overrides(p: &Planned) -> Vec<String> {
 }
 
 /// Trains the run `p` with the `train` binary found next to this executable (resuming on its
-/// own); its output goes to `RUN/train.log`.
-pub fn train(p: &Planned, runs_dir: &Path) -> Result<(), EvalError> {
+/// own), on `threads` kernel threads (`None`: `train`'s default, one per core); its output goes
+/// to `RUN/train.log`.
+pub fn train(p: &Planned, runs_dir: &Path, threads: Option<usize>) -> Result<(), EvalError> {
     let (spec, name) = (p.spec, p.name.as_str());
     let exe = std::env::current_exe().map_err(|e| EvalError::Argument(e.to_string()))?;
     let bin = exe.with_file_name(format!("train{}", std::env::consts::EXE_SUFFIX));
@@ -336,6 +337,9 @@ pub fn train(p: &Planned, runs_dir: &Path) -> Result<(), EvalError> {
         .arg("--quiet")
         .arg("--run-dir")
         .arg(&run);
+    if let Some(n) = threads {
+        cmd.arg("--threads").arg(n.to_string());
+    }
     for s in train_overrides(p) {
         cmd.arg("--set").arg(s);
     }
@@ -354,6 +358,12 @@ pub fn train(p: &Planned, runs_dir: &Path) -> Result<(), EvalError> {
         )));
     }
     Ok(())
+}
+
+/// Kernel threads for each of `jobs` trainings run side by side on `cores` cores: the cores
+/// shared out (at least one each), so that N trainings do not each start one thread per core.
+pub fn threads_per_job(cores: usize, jobs: usize) -> usize {
+    (cores / jobs.max(1)).max(1)
 }
 
 /// The `data.dir=VALUE` override among `spec`'s `set` (the last one wins), as given.
@@ -1321,6 +1331,16 @@ mod tests {
         let p = dir.path().join("x.toml");
         std::fs::write(&p, text).unwrap();
         (dir, p)
+    }
+
+    #[test]
+    fn side_by_side_trainings_share_the_cores() {
+        assert_eq!(threads_per_job(2, 2), 1);
+        assert_eq!(threads_per_job(16, 2), 8);
+        assert_eq!(threads_per_job(16, 3), 5);
+        assert_eq!(threads_per_job(2, 4), 1, "at least one thread each");
+        assert_eq!(threads_per_job(2, 1), 2);
+        assert_eq!(threads_per_job(4, 0), 4, "no jobs reads as one");
     }
 
     #[test]

@@ -797,10 +797,12 @@ fn experiment(
         let (alone, side_by_side) = exp::training_waves(&todo, exp::dataset_ready);
         for p in &alone {
             bar.set_message(format!("{}: training (generates its dataset)", p.name));
-            exp::train(p, &x.runs_dir)?;
+            exp::train(p, &x.runs_dir, None)?;
         }
+        let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
+        let threads = exp::threads_per_job(cores, jobs);
         bar.set_message(format!(
-            "training {} runs, {} at once",
+            "training {} runs, {} at once, {threads} threads each",
             side_by_side.len(),
             jobs
         ));
@@ -810,7 +812,7 @@ fn experiment(
             || Ok(()),
             |_, k| {
                 let p = side_by_side[k];
-                exp::train(p, &x.runs_dir)
+                exp::train(p, &x.runs_dir, Some(threads))
             },
             || EvalError::Model("a training thread panicked".into()),
         )?;
@@ -828,7 +830,7 @@ fn experiment(
         }
         if !pretrained {
             bar.set_message(format!("{}: training", p.name));
-            exp::train(p, &x.runs_dir)?;
+            exp::train(p, &x.runs_dir, None)?;
         }
         let rd = eval::run::open(&run)?;
         let device = eval::run::device(&rd, None)?;
