@@ -100,7 +100,7 @@ pub struct RunSpec {
     pub seeds: Vec<u64>,
 }
 
-/// Which of an experiment's runs to train and evaluate now (`eval experiment --obs/--suite`);
+/// Which of an experiment's runs to train and evaluate now (`eval experiment --obs/--suite/--tag`);
 /// `None` admits every value.
 #[derive(Debug, Clone, Default, PartialEq)]
 pub struct Only {
@@ -108,6 +108,8 @@ pub struct Only {
     pub obs: Option<String>,
     /// Suite, as a run's `suite` names it.
     pub suite: Option<String>,
+    /// Group tag, as a run's `tag` names it (`""` admits the groups without one).
+    pub tag: Option<String>,
 }
 
 impl Only {
@@ -115,28 +117,39 @@ impl Only {
     pub fn admits(&self, spec: &RunSpec) -> bool {
         self.obs.as_ref().is_none_or(|o| *o == spec.obs)
             && self.suite.as_ref().is_none_or(|s| *s == spec.suite)
+            && self
+                .tag
+                .as_ref()
+                .is_none_or(|t| *t == spec.tag.as_deref().unwrap_or(""))
     }
 
     /// An error naming `file` when no run of `x` is admitted (a misspelt mode or suite), listing
     /// the file's modes and suites in file order.
     pub fn check(&self, x: &Experiment, file: &Path) -> Result<(), EvalError> {
-        if self.obs.is_none() && self.suite.is_none() || x.runs.iter().any(|r| self.admits(r)) {
+        if self.obs.is_none() && self.suite.is_none() && self.tag.is_none()
+            || x.runs.iter().any(|r| self.admits(r))
+        {
             return Ok(());
         }
         let modes = report::first_seen(x.runs.iter().map(|r| r.obs.as_str()));
         let suites = report::first_seen(x.runs.iter().map(|r| r.suite.as_str()));
+        let tags = report::first_seen(x.runs.iter().filter_map(|r| r.tag.as_deref()));
         Err(EvalError::Input {
             path: file.to_path_buf(),
             message: format!(
-                "no run has{}{} (modes: {}; suites: {})",
+                "no run has{}{}{} (modes: {}; suites: {}; tags: {})",
                 self.obs
                     .as_ref()
                     .map_or(String::new(), |o| format!(" obs = \"{o}\"")),
                 self.suite
                     .as_ref()
                     .map_or(String::new(), |s| format!(" suite = \"{s}\"")),
+                self.tag
+                    .as_ref()
+                    .map_or(String::new(), |t| format!(" tag = \"{t}\"")),
                 modes.join(", "),
-                suites.join(", ")
+                suites.join(", "),
+                tags.join(", ")
             ),
         })
     }
@@ -1352,6 +1365,7 @@ mod tests {
         let only = |obs: Option<&str>, suite: Option<&str>| Only {
             obs: obs.map(String::from),
             suite: suite.map(String::from),
+            tag: None,
         };
         let admitted = |o: &Only| -> Vec<bool> { x.runs.iter().map(|r| o.admits(r)).collect() };
         assert_eq!(admitted(&Only::default()), [true, true]);
@@ -1366,8 +1380,28 @@ mod tests {
         assert!(err.starts_with(&p.display().to_string()), "{err}");
         assert!(
             err.ends_with(
-                "no run has obs = \"state\" suite = \"t1\" (modes: state, pixels; suites: libero_mem, t1)"
+                "no run has obs = \"state\" suite = \"t1\" (modes: state, pixels; suites: libero_mem, t1; tags: )"
             ),
+            "{err}"
+        );
+    }
+
+    #[test]
+    fn only_admits_a_tag_and_the_empty_tag_admits_untagged_groups() {
+        let (_dir, p) = experiment_file(
+            "name = \"paper\"\nout = \"docs\"\n[[runs]]\nobs = \"state\"\nsuite = \"libero_mem\"\nconfig = \"c.toml\"\nvariants = [\"e_slotssm\"]\n[[runs]]\nobs = \"state\"\nsuite = \"libero_mem\"\nconfig = \"c.toml\"\nvariants = [\"e_slotssm\"]\ntag = \"40k\"\n",
+        );
+        let x = Experiment::load(&p).unwrap();
+        let tag = |t: &str| Only {
+            tag: Some(t.into()),
+            ..Only::default()
+        };
+        let admitted = |o: &Only| -> Vec<bool> { x.runs.iter().map(|r| o.admits(r)).collect() };
+        assert_eq!(admitted(&tag("40k")), [false, true]);
+        assert_eq!(admitted(&tag("")), [true, false]);
+        let err = tag("4k").check(&x, &p).unwrap_err().to_string();
+        assert!(
+            err.ends_with("no run has tag = \"4k\" (modes: state; suites: libero_mem; tags: 40k)"),
             "{err}"
         );
     }

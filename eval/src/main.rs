@@ -107,6 +107,10 @@ enum Command {
         /// `libero_mem`); the tables keep every run of the file evaluated so far.
         #[arg(long)]
         suite: Option<String>,
+        /// Train and evaluate only the runs of the groups with this `tag` (`""`: the groups
+        /// without one); the tables keep every run of the file evaluated so far.
+        #[arg(long)]
+        tag: Option<String>,
     },
     /// Join the results of the shards of one evaluation (`eval --shard I/N`, e.g. a Slurm array
     /// job's tasks) into the unsharded run's results.{md,json,csv}.
@@ -267,12 +271,13 @@ fn main() -> ExitCode {
             jobs,
             obs,
             suite,
+            tag,
         }) => experiment(
             &file,
             tables_only,
             quiet,
             jobs as usize,
-            &eval::experiment::Only { obs, suite },
+            &eval::experiment::Only { obs, suite, tag },
         ),
         None => evaluate(&cli.eval),
     };

@@ -157,6 +157,17 @@ pub struct EncoderConfig {
     pub strides: Vec<usize>,
     /// Feature width D_f (channels of the final 3×3 conv and of the output).
     pub feature_dim: usize,
+    /// State mode: the factor the category embedding is multiplied by before it joins the
+    /// projected token numbers under the token's LayerNorm (absent: 1, as configs and runs
+    /// written before it). At 1 the N(0, 1) embedding outweighs the centimetres of an object's
+    /// offset to the hand, and policies learn one reach whatever the scene (see
+    /// [`crate::encoder::StateEncoder`]).
+    #[serde(default = "one")]
+    pub category_scale: f64,
+}
+
+fn one() -> f64 {
+    1.0
 }
 
 /// Slot attention (model.md §2).
@@ -399,6 +410,7 @@ impl ModelConfig {
                 channels: vec![32, 64, 64],
                 strides: vec![2, 2, 2],
                 feature_dim: 64,
+                category_scale: 1.0,
             },
             slots: SlotConfig {
                 num_slots: 8,
@@ -467,6 +479,7 @@ impl ModelConfig {
                 channels: vec![64, 128, 256, 256],
                 strides: vec![2, 2, 2, 2],
                 feature_dim: 256,
+                category_scale: 1.0,
             },
             slots: SlotConfig {
                 num_slots: 16,
@@ -661,6 +674,12 @@ impl ModelConfig {
         if self.encoder.strides.contains(&0) {
             return err("encoder.strides must be ≥ 1".into());
         }
+        let cs = self.encoder.category_scale;
+        if !(cs.is_finite() && (0.0..=100.0).contains(&cs)) {
+            return err(format!(
+                "encoder.category_scale = {cs}: must be a finite number in [0, 100]"
+            ));
+        }
         let [gh, gw] = self.grid();
         if !self.image_size[0].is_multiple_of(gh) || !self.image_size[1].is_multiple_of(gw) {
             return err(format!(
@@ -837,6 +856,34 @@ mod tests {
         assert!(cfg.validate().is_err());
         cfg.decoder.heads = 3; // 128 is not a multiple of 3
         assert!(cfg.validate().is_err());
+        for bad in [f64::NAN, -0.1, 1e9] {
+            let mut cfg = ModelConfig::tiny(Variant::Dense { history: 1 });
+            cfg.encoder.category_scale = bad;
+            let e = cfg.validate().unwrap_err().to_string();
+            assert!(
+                e.contains("encoder.category_scale") && e.contains("[0, 100]"),
+                "{e}"
+            );
+        }
+    }
+
+    #[test]
+    fn category_scale_reads_as_one_when_absent() {
+        let e: EncoderConfig =
+            serde_json::from_str(r#"{"channels": [32], "strides": [2], "feature_dim": 16}"#)
+                .unwrap();
+        assert_eq!(e.category_scale, 1.0);
+        let e: EncoderConfig = serde_json::from_str(
+            r#"{"channels": [32], "strides": [2], "feature_dim": 16, "category_scale": 0.1}"#,
+        )
+        .unwrap();
+        assert_eq!(e.category_scale, 0.1);
+        assert_eq!(
+            ModelConfig::tiny(Variant::Dense { history: 1 })
+                .encoder
+                .category_scale,
+            1.0
+        );
     }
 
     #[test]
