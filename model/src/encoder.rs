@@ -209,12 +209,8 @@ impl StateEncoder {
             .category
             .forward(categories.reshape([b * t, n]))
             .reshape([b, t, n, d_f]);
-        let e = if self.category_scale == 1.0 {
-            e
-        } else {
-            e.mul_scalar(self.category_scale)
-        };
-        let x = self.input.forward(features) + e;
+        // × 1 is exact, so runs without the option keep their numbers bit for bit.
+        let x = self.input.forward(features) + e.mul_scalar(self.category_scale);
         Ok(self.mlp.forward(self.norm.forward(x)))
     }
 }
@@ -473,10 +469,14 @@ mod tests {
         v[FEATURES] = 0.5;
         let x = Tensor::<4>::from_data(TensorData::new(v, [1, 1, 2, FEATURES]), &device);
         let c = Tensor::<3, Int>::from_data(TensorData::new(vec![3i64, 3], [1, 1, 2]), &device);
-        let spread = |scale: f64| -> f32 {
+        // The LayerNorm's output `[1, 2, D_f]` with the embedding at `scale`, computed by hand.
+        let normed = |scale: f64| {
             let e = enc.category.forward(c.clone().reshape([1, 2]));
             let h = enc.input.forward(x.clone()).reshape([1, 2, 16]) + e.mul_scalar(scale);
-            let y = enc.norm.forward(h).reshape([2, 16]);
+            enc.norm.forward(h)
+        };
+        let spread = |scale: f64| -> f32 {
+            let y = normed(scale).reshape([2, 16]);
             (y.clone().narrow(0, 0, 1) - y.narrow(0, 1, 1))
                 .abs()
                 .sum()
@@ -488,11 +488,7 @@ mod tests {
             ..enc.clone()
         };
         let direct = scaled.forward(x.clone(), c.clone()).unwrap();
-        let by_hand = {
-            let e = enc.category.forward(c.clone().reshape([1, 2]));
-            let h = enc.input.forward(x.clone()).reshape([1, 2, 16]) + e.mul_scalar(0.1);
-            enc.mlp.forward(enc.norm.forward(h)).reshape([1, 1, 2, 16])
-        };
+        let by_hand = enc.mlp.forward(normed(0.1)).reshape([1, 1, 2, 16]);
         let diff: f32 = (direct - by_hand).abs().max().into_scalar();
         assert!(diff < 1e-6, "forward at scale 0.1 differs by {diff}");
         // A smaller embedding leaves the numbers more of the normalised token.
