@@ -269,19 +269,26 @@ pub fn parallel_scan(a: Tensor<4>, b: Tensor<4>, h_init: Option<Tensor<3>>) -> T
             first
         };
     }
+    // Round d: h_i ← h_i + a_i ⊙ h_{i−d} and a_i ← a_i ⊙ a_{i−d} (a zero / one shift in
+    // front: each round is then two slices and two cats, which autodiff's backward handles more
+    // cheaply than slicing the tails apart). The last round's products of a are never read.
     let mut d = 1;
     while d < t {
-        let a_shift = Tensor::cat(
-            vec![
-                Tensor::ones([n, d, e, s], &device),
-                a.clone().narrow(1, 0, t - d),
-            ],
-            1,
-        );
+        let last = 2 * d >= t;
         let b_shift = Tensor::cat(
             vec![
                 Tensor::zeros([n, d, e, s], &device),
                 b.clone().narrow(1, 0, t - d),
+            ],
+            1,
+        );
+        if last {
+            return b + a * b_shift;
+        }
+        let a_shift = Tensor::cat(
+            vec![
+                Tensor::ones([n, d, e, s], &device),
+                a.clone().narrow(1, 0, t - d),
             ],
             1,
         );

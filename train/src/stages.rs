@@ -88,28 +88,42 @@ pub fn active(stages: &[Stage], step: u64) -> Option<(usize, &Stage)> {
 }
 
 /// The stage's total: Σ λ_term · L_term over its `losses` that the model computes (`None` when
-/// it computes none of them).
+/// it computes none of them). Terms of weight 0 are left out of the sum when another term is
+/// in it: they add exactly nothing, and the backward pass then skips their graphs (the state
+/// configs' contrastive loss is still computed and logged, but no longer differentiated).
 pub fn total(stage: &Stage, losses: &Losses, weights: &LossConfig) -> Option<Tensor<1>> {
+    let terms: Vec<(&Tensor<1>, f64)> = stage
+        .losses
+        .iter()
+        .filter_map(|name| term(name, losses, weights))
+        .collect();
+    let weighted = terms.iter().any(|&(_, w)| w != 0.0);
     let mut total: Option<Tensor<1>> = None;
-    for name in &stage.losses {
-        let (term, w) = match name.as_str() {
-            "action" => (Some(&losses.action), weights.action),
-            "contrastive" => (losses.contrastive.as_ref(), weights.contrastive),
-            "window" => (losses.window.as_ref(), weights.window),
-            "slot_recon" => (losses.slot_recon.as_ref(), weights.slot_recon),
-            "pointer" => (losses.pointer.as_ref(), weights.pointer),
-            "progress" => (losses.progress.as_ref(), weights.progress),
-            _ => (None, 0.0),
-        };
-        if let Some(t) = term {
-            let t = t.clone().mul_scalar(w);
-            total = Some(match total {
-                Some(s) => s + t,
-                None => t,
-            });
+    for (t, w) in terms {
+        if weighted && w == 0.0 {
+            continue;
         }
+        let t = t.clone().mul_scalar(w);
+        total = Some(match total {
+            Some(s) => s + t,
+            None => t,
+        });
     }
     total
+}
+
+/// The loss named `name` (when the model computes it) and its weight.
+fn term<'a>(name: &str, losses: &'a Losses, weights: &LossConfig) -> Option<(&'a Tensor<1>, f64)> {
+    let (term, w) = match name {
+        "action" => (Some(&losses.action), weights.action),
+        "contrastive" => (losses.contrastive.as_ref(), weights.contrastive),
+        "window" => (losses.window.as_ref(), weights.window),
+        "slot_recon" => (losses.slot_recon.as_ref(), weights.slot_recon),
+        "pointer" => (losses.pointer.as_ref(), weights.pointer),
+        "progress" => (losses.progress.as_ref(), weights.progress),
+        _ => (None, 0.0),
+    };
+    term.map(|t| (t, w))
 }
 
 /// Walks the model tree (module path = field and variant names, e.g.
@@ -257,6 +271,54 @@ mod tests {
         let mut bad = stage("x", None);
         bad.losses = vec!["actoin".into()];
         assert!(check(&[bad]).unwrap_err().contains("train.stages[0]"));
+    }
+
+    #[test]
+    fn zero_weight_terms_add_nothing_and_are_not_differentiated() {
+        let device = Device::flex().autodiff();
+        let x = Tensor::<1>::from_floats([0.5], &device).require_grad();
+        let y = Tensor::<1>::from_floats([2.0], &device).require_grad();
+        let losses = Losses {
+            total: x.clone() + y.clone(),
+            action: x.clone().mul_scalar(3.0),
+            // NaN (√−1): left out, it cannot poison the total or the gradients.
+            contrastive: Some(y.clone().sub_scalar(3.0).sqrt()),
+            window: Some(x.clone() * y.clone()),
+            slot_recon: None,
+            pointer: None,
+            progress: None,
+        };
+        let weights = |contrastive: f64| LossConfig {
+            action: 1.0,
+            contrastive,
+            window: 0.5,
+            slot_recon: 0.0,
+            gripper: 1.0,
+            pointer: 0.0,
+            progress: 0.0,
+            ..model::ModelConfig::tiny(model::Variant::from_name("e_slotssm").unwrap()).loss
+        };
+        let mut s = stage("s", None);
+        s.losses = ["action", "contrastive", "window", "slot_recon"]
+            .map(String::from)
+            .into();
+        // 3·0.5 + 0.5·(0.5·2) = 2.0; the contrastive term at weight 0 neither counts nor
+        // sends a gradient to y beyond the window term's x = 0.5 · 0.5.
+        let t = total(&s, &losses, &weights(0.0)).unwrap();
+        assert_eq!(t.clone().into_scalar::<f32>(), 2.0);
+        let g = t.backward();
+        assert_eq!(y.grad(&g).unwrap().into_scalar::<f32>(), 0.25);
+        assert_eq!(x.grad(&g).unwrap().into_scalar::<f32>(), 3.0 + 0.5 * 2.0);
+        // Weighted, it counts.
+        let t = total(&s, &losses, &weights(0.1)).unwrap();
+        assert!(t.into_scalar::<f32>().is_nan());
+        // A stage of zero-weight terms alone still has a total (0 · L).
+        s.losses = vec!["window".into()];
+        let mut w = weights(0.0);
+        w.window = 0.0;
+        assert_eq!(total(&s, &losses, &w).unwrap().into_scalar::<f32>(), 0.0);
+        s.losses = vec!["slot_recon".into()];
+        assert!(total(&s, &losses, &weights(0.0)).is_none());
     }
 
     #[test]
