@@ -432,6 +432,15 @@ pub fn training_waves<'a, 'b>(
     (alone, side_by_side)
 }
 
+/// The optimiser steps a run directory is configured to train: `[train] steps` of its
+/// `config.toml` (None when it cannot be read).
+pub fn planned_steps(run: &Path) -> Option<u64> {
+    let text = std::fs::read_to_string(run.join("config.toml")).ok()?;
+    let value = text.parse::<toml::Table>().ok()?;
+    let steps = value.get("train")?.get("steps")?.as_integer()?;
+    u64::try_from(steps).ok()
+}
+
 /// Training wall time (seconds) and steps of a run, from its `metrics.jsonl`.
 pub fn training_cost(run: &Path) -> (Option<f64>, Option<u64>) {
     let Ok(text) = std::fs::read_to_string(run.join("metrics.jsonl")) else {
@@ -1041,6 +1050,13 @@ pub fn load_result(x: &Experiment, run: &Path, obs: &str, label: &str) -> Option
     if !x.same_protocol(r.episodes_per_task, r.seed, r.full_budget) || r.execution.is_some() {
         return None;
     }
+    // An evaluation of a checkpoint before the run's last step (an `eval --run` while it was
+    // still training) is not the run's result: the run is trained to the end and evaluated again.
+    if let (Some(at), Some(total)) = (r.checkpoint_step, planned_steps(run))
+        && at != total
+    {
+        return None;
+    }
     let (train_s, steps) = training_cost(run);
     Some(RunResult {
         obs: obs.to_string(),
@@ -1189,6 +1205,20 @@ mod tests {
         r.full_budget = false;
         write(&r);
         assert!(load_result(&x, &run, "state", "e_slotssm").is_none());
+        // Only the evaluation of the run's last step counts.
+        r.full_budget = true;
+        std::fs::write(
+            run.join("config.toml"),
+            "name = \"r\"\n[train]\nsteps = 8000\n",
+        )
+        .unwrap();
+        assert_eq!(planned_steps(&run), Some(8000));
+        r.checkpoint_step = Some(4000);
+        write(&r);
+        assert!(load_result(&x, &run, "state", "e_slotssm").is_none());
+        r.checkpoint_step = Some(8000);
+        write(&r);
+        assert!(load_result(&x, &run, "state", "e_slotssm").is_some());
     }
 
     fn state_run(variant: &str, tasks: Vec<TaskSummary>) -> RunResult {

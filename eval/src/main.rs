@@ -211,7 +211,13 @@ struct EvalArgs {
     /// renders: LIBERO's look, for policies trained on LIBERO's images).
     #[arg(long, default_value = "fast", value_parser = ["fast", "libero", "high"])]
     quality: String,
-    /// Folder for results.md, results.json and results.csv [default: RUN/eval, else `results`].
+    /// Evaluate the run's checkpoint of this training step (`RUN/checkpoints/step_…`, e.g. 40000)
+    /// instead of its newest one: closed-loop learning curves. Its results go to RUN/eval_step_N
+    /// unless --out says otherwise, so RUN/eval stays the evaluation of the finished run.
+    #[arg(long)]
+    checkpoint: Option<u64>,
+    /// Folder for results.md, results.json and results.csv [default: RUN/eval (RUN/eval_step_N
+    /// with --checkpoint N), else `results`].
     #[arg(long)]
     out: Option<PathBuf>,
     /// Record every rollout as an mcap episode under this folder.
@@ -329,7 +335,7 @@ fn setup(args: &EvalArgs) -> anyhow::Result<Setup> {
         }
     };
     let run = match (kind, &args.run) {
-        (PolicyKind::Model, Some(dir)) => Some(eval::run::open(dir)?),
+        (PolicyKind::Model, Some(dir)) => Some(eval::run::open_at(dir, args.checkpoint)?),
         (PolicyKind::Model, None) => {
             return Err(
                 EvalError::Argument("`--policy model` needs `--run runs/NAME`".into()).into(),
@@ -337,6 +343,12 @@ fn setup(args: &EvalArgs) -> anyhow::Result<Setup> {
         }
         _ => None,
     };
+    if args.checkpoint.is_some() && run.is_none() {
+        return Err(EvalError::Argument(
+            "--checkpoint needs a model policy (`--run runs/NAME`)".into(),
+        )
+        .into());
+    }
     if args.viz && kind != PolicyKind::Model {
         return Err(EvalError::Argument("--viz needs the model policy (`--run`)".into()).into());
     }
@@ -356,7 +368,10 @@ fn setup(args: &EvalArgs) -> anyhow::Result<Setup> {
     };
     let out = match (&args.out, &run) {
         (Some(o), _) => o.clone(),
-        (None, Some(r)) => r.dir.join("eval"),
+        (None, Some(r)) => r.dir.join(match args.checkpoint {
+            Some(step) => format!("eval_step_{step}"),
+            None => "eval".to_string(),
+        }),
         (None, None) => PathBuf::from("results"),
     };
     Ok(Setup {

@@ -22,8 +22,14 @@ impl From<model::ModelError> for EvalError {
 /// Opens `dir` as [`RunDir::open`] does (the newest checkpoint that verifies, the trainer's rule)
 /// and says on stderr which checkpoint it uses and which newer ones it skipped, and why.
 pub fn open(dir: impl AsRef<Path>) -> Result<RunDir, EvalError> {
+    open_at(dir, None)
+}
+
+/// [`open`] at the checkpoint of `step` when given (`eval --checkpoint STEP`; an error naming
+/// the steps the run holds when it has no such checkpoint).
+pub fn open_at(dir: impl AsRef<Path>, step: Option<u64>) -> Result<RunDir, EvalError> {
     let t = std::time::Instant::now();
-    let run = RunDir::open(dir)?;
+    let run = RunDir::open_at(dir, step)?;
     let ms = t.elapsed().as_secs_f64() * 1e3;
     for (skipped, why) in &run.skipped {
         eprintln!(

@@ -222,6 +222,33 @@ pub fn newest_valid(run_dir: &Path) -> Result<Option<Chosen>> {
     }
 }
 
+/// The checkpoint of `step` (it must be complete and verify): for evaluating a run's earlier
+/// checkpoints. An error naming the checkpoints folder and the steps it holds when there is none.
+pub fn at_step(run_dir: &Path, step: u64) -> Result<Chosen> {
+    let all = list(run_dir)?;
+    let Some((_, dir)) = all.iter().find(|(s, _)| *s == step) else {
+        let have: Vec<String> = all.iter().map(|(s, _)| s.to_string()).collect();
+        return Err(ModelError::run(
+            run_dir.join(CHECKPOINTS),
+            format!(
+                "no complete checkpoint of step {step} (it holds {})",
+                if have.is_empty() {
+                    "none".to_string()
+                } else {
+                    format!("steps {}", have.join(", "))
+                }
+            ),
+        ));
+    };
+    let (info, verified) = verify_checkpoint(dir)?;
+    Ok(Chosen {
+        dir: dir.clone(),
+        info,
+        verified,
+        skipped: vec![],
+    })
+}
+
 /// `run.json`: what a run is besides its model.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -507,6 +534,12 @@ pub struct RunDir {
 impl RunDir {
     /// Opens `dir`, checking that its files agree with each other and with the checkpoint.
     pub fn open(dir: impl AsRef<Path>) -> Result<RunDir> {
+        RunDir::open_at(dir, None)
+    }
+
+    /// Opens `dir` as [`RunDir::open`] does, at the checkpoint of `step` when given ([`at_step`])
+    /// instead of the newest one that verifies.
+    pub fn open_at(dir: impl AsRef<Path>, step: Option<u64>) -> Result<RunDir> {
         let dir = dir.as_ref();
         if !dir.is_dir() {
             return Err(ModelError::run(
@@ -528,12 +561,15 @@ impl RunDir {
             Processor::from_config(read_json::<ProcessorConfig>(&proc_path, "processor")?)
                 .and_then(|p| p.check_model(&model).map(|_| p))
                 .map_err(|e| ModelError::run(&proc_path, e.to_string()))?;
-        let chosen = newest_valid(dir)?.ok_or_else(|| {
-            ModelError::run(
-                dir.join(CHECKPOINTS),
-                "no complete checkpoint (has the run trained past its first checkpoint?)",
-            )
-        })?;
+        let chosen = match step {
+            Some(step) => at_step(dir, step)?,
+            None => newest_valid(dir)?.ok_or_else(|| {
+                ModelError::run(
+                    dir.join(CHECKPOINTS),
+                    "no complete checkpoint (has the run trained past its first checkpoint?)",
+                )
+            })?,
+        };
         let (checkpoint, state) = (chosen.dir, chosen.info);
         if let Some(diff) = model_difference(&state.model, &model) {
             return Err(ModelError::run(

@@ -596,6 +596,20 @@ fn corrupt_newest_checkpoint_is_skipped_by_resume_and_by_the_evaluator_alike() {
         "{:?}",
         run.skipped
     );
+    // Asked for a step, the reader takes that checkpoint or fails: no silent fallback.
+    let at4 = model::RunDir::open_at(b.path(), Some(4)).unwrap();
+    assert_eq!(
+        (at4.step, at4.checkpoint.clone()),
+        (4, run.checkpoint.clone())
+    );
+    let e = model::RunDir::open_at(b.path(), Some(8)).unwrap_err();
+    assert!(e.to_string().contains("sha256 mismatch"), "{e}");
+    let e = model::RunDir::open_at(b.path(), Some(6)).unwrap_err();
+    assert!(
+        e.to_string()
+            .contains("checkpoints: no complete checkpoint of step 6 (it holds steps 4, 8)"),
+        "{e}"
+    );
     let s = train::train(&cfg, &opts(b.path())).unwrap();
     assert_eq!((s.start_step, s.step), (4, 8));
     // Redoing steps 5..8 from step 4 gives the uninterrupted run's weights.
