@@ -852,6 +852,14 @@ fn experiment(
             bar.set_message(format!("{}: training", p.name));
             exp::train(p, &x.runs_dir, None)?;
         }
+        // Evaluated meanwhile (`eval --run` by hand on a free core while other runs trained):
+        // the same protocol at the run's last step gives the same rows, so they are taken.
+        if let Some(r) = exp::load_result(&x, &run, &p.spec.obs, &p.label) {
+            eprintln!("{}: evaluated meanwhile, its results read back", p.name);
+            done.push(r);
+            bar.inc(1);
+            continue;
+        }
         let rd = eval::run::open(&run)?;
         let device = eval::run::device(&rd, None)?;
         let tasks = eval::resolve_tasks(&p.spec.suite, None)?;
