@@ -138,6 +138,34 @@ fn checkpoint_of_another_model_is_exit_2() {
     );
 }
 
+/// `--checkpoint N` takes that step's checkpoint or fails naming the steps the run holds; without
+/// a run it is an argument error. Both exit 2.
+#[test]
+fn checkpoint_of_a_missing_step_is_exit_2_naming_the_steps() {
+    let tmp = tempfile::tempdir().unwrap();
+    let run = tmp.path().join("run");
+    let model = bare_run(&run);
+    unreadable_checkpoint(&run, &model);
+    let r = run.to_str().unwrap();
+    let (code, _, err) = eval(&["--run", r, "--checkpoint", "4", "--tasks", "t1"]);
+    assert_eq!(code, 2, "{err}");
+    assert!(
+        err.contains("no complete checkpoint of step 4 (it holds steps 10)"),
+        "{err}"
+    );
+    // The step it holds is the one opened: its (unreadable) weights are what fails.
+    let (code, _, err) = eval(&["--run", r, "--checkpoint", "10", "--tasks", "t1"]);
+    assert_eq!(code, 2, "{err}");
+    assert!(
+        err.contains("step_000000010") && err.contains("model.bpk"),
+        "{err}"
+    );
+    assert!(!run.join("eval_step_10/results.json").exists());
+    let (code, _, err) = eval(&["--policy", "zero", "--checkpoint", "10", "--tasks", "t1"]);
+    assert_eq!(code, 2, "{err}");
+    assert!(err.contains("--checkpoint needs a model policy"), "{err}");
+}
+
 /// `eval serve --backend` picks the device the served policy runs on; one this binary lacks is
 /// exit 2 naming it, before anything listens.
 #[test]
