@@ -120,6 +120,16 @@ fn unreadable_checkpoint(run: &Path, model: &model::ModelConfig) {
     std::fs::write(ck.join("model.bpk"), b"not weights").unwrap();
 }
 
+/// A bare run (in a temporary folder, kept alive by the returned guard) whose only checkpoint,
+/// step 10, names the run's own model and holds unreadable weights.
+fn run_with_unreadable_checkpoint() -> (tempfile::TempDir, std::path::PathBuf) {
+    let tmp = tempfile::tempdir().unwrap();
+    let run = tmp.path().join("run");
+    let model = bare_run(&run);
+    unreadable_checkpoint(&run, &model);
+    (tmp, run)
+}
+
 #[test]
 fn checkpoint_of_another_model_is_exit_2() {
     let tmp = tempfile::tempdir().unwrap();
@@ -142,10 +152,7 @@ fn checkpoint_of_another_model_is_exit_2() {
 /// a run it is an argument error. Both exit 2.
 #[test]
 fn checkpoint_of_a_missing_step_is_exit_2_naming_the_steps() {
-    let tmp = tempfile::tempdir().unwrap();
-    let run = tmp.path().join("run");
-    let model = bare_run(&run);
-    unreadable_checkpoint(&run, &model);
+    let (_tmp, run) = run_with_unreadable_checkpoint();
     let r = run.to_str().unwrap();
     let (code, _, err) = eval(&["--run", r, "--checkpoint", "4", "--tasks", "t1"]);
     assert_eq!(code, 2, "{err}");
@@ -170,10 +177,7 @@ fn checkpoint_of_a_missing_step_is_exit_2_naming_the_steps() {
 /// exit 2 naming it, before anything listens.
 #[test]
 fn serve_backend_override_is_checked() {
-    let tmp = tempfile::tempdir().unwrap();
-    let run = tmp.path().join("run");
-    let model = bare_run(&run);
-    unreadable_checkpoint(&run, &model);
+    let (_tmp, run) = run_with_unreadable_checkpoint();
     let run = run.to_str().unwrap();
     let (code, _, err) = eval(&["serve", "--run", run, "--port", "0", "--backend", "cuda"]);
     assert_eq!(code, 2, "{err}");
