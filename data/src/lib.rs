@@ -34,6 +34,7 @@
 
 #![warn(missing_docs)]
 
+pub mod alloc;
 pub mod bench;
 pub mod draw;
 pub mod episode;

@@ -9,7 +9,8 @@ use eval::report::{self, Results, ScalingRow};
 use eval::{EvalConfig, EvalError, Policy, RunDir};
 
 /// mimalloc as the allocator, as in `train`: the policy allocates and frees many tensor buffers
-/// per step, whose pages glibc's malloc returns to the kernel and faults in again.
+/// per step, whose pages glibc's malloc returns to the kernel and faults in again; `main` also
+/// turns mimalloc's own purging off ([`data::alloc::keep_freed_pages`]).
 #[global_allocator]
 static ALLOCATOR: mimalloc::MiMalloc = mimalloc::MiMalloc;
 
@@ -258,6 +259,7 @@ struct EvalArgs {
 }
 
 fn main() -> ExitCode {
+    data::alloc::keep_freed_pages();
     let cli = Cli::parse();
     let result = match cli.command {
         Some(Command::Compare { runs, out }) => compare(&runs, out),

@@ -9,7 +9,8 @@ use clap::Parser;
 
 /// mimalloc as the allocator: the model allocates and frees many tensor buffers per step, whose
 /// pages glibc's malloc returns to the kernel and faults in again (≈ 10 % of the
-/// decoder's forward+backward alone).
+/// decoder's forward+backward alone); `main` also turns mimalloc's own purging off
+/// ([`data::alloc::keep_freed_pages`]).
 #[global_allocator]
 static ALLOCATOR: mimalloc::MiMalloc = mimalloc::MiMalloc;
 
@@ -106,6 +107,7 @@ fn run(args: Args) -> Result<Outcome, train::TrainError> {
 }
 
 fn main() -> ExitCode {
+    data::alloc::keep_freed_pages();
     let args = match Args::try_parse() {
         Ok(a) => a,
         Err(e) => {
