@@ -20,13 +20,19 @@
 //!    twin's `bench.py --breakdown`.
 //!
 //! Run: `cargo bench -p model` (add `--profile dev` to reuse the dev build: dependencies are
-//! optimised there too). Environment: `BENCH_QUICK=1` runs fewer repetitions.
+//! optimised there too). Environment: `BENCH_QUICK=1` runs fewer repetitions. The bench runs on
+//! the `train` and `eval` binaries' allocator, mimalloc without purging
+//! ([`data::alloc::keep_freed_pages`]; `MIMALLOC_PURGE_DELAY=1000` gives mimalloc's default).
 
 use std::time::Instant;
 
 use burn::prelude::*;
 use burn::tensor::Distribution;
 use model::{ModelConfig, PolicyModel, StreamingPolicy, Tokenizer, Variant, WindowBatch};
+
+/// The binaries' allocator, so that the figures are the trainer's.
+#[global_allocator]
+static ALLOCATOR: mimalloc::MiMalloc = mimalloc::MiMalloc;
 
 const INSTRUCTION: &str = "put the bowl on the plate";
 
@@ -287,6 +293,7 @@ fn full_memory() {
 }
 
 fn main() {
+    data::alloc::keep_freed_pages();
     // One core for the per-step figures (flex parallelises with rayon).
     rayon::ThreadPoolBuilder::new()
         .num_threads(1)
