@@ -357,21 +357,16 @@ pub fn conv_as_matmul(conv: &Conv2d, x: Tensor<4>) -> Tensor<4> {
     else {
         return conv.forward(x);
     };
-    let (ho, wo) = ((h + 2 * ph - kh) / sh + 1, (w + 2 * pw - kw) / sw + 1);
     let geometry = PatchGeometry {
         kernel: [kh, kw],
         stride: [sh, sw],
         padding: [ph, pw],
     };
+    let [ho, wo] = geometry.output([h, w]);
     let patches = if x.device().inner() == Device::flex() && !x.is_require_grad() {
         host_patches(x, &geometry)
     } else {
-        let padded = x.pad([(ph, ph), (pw, pw)], PadMode::Constant(0.0)); // [N, C, H+2p, W+2p]
-        padded
-            .unfold::<5, _>(2, kh, sh) // [N, C, Ho, W+2p, kh]
-            .unfold::<6, _>(3, kw, sw) // [N, C, Ho, Wo, kh, kw]
-            .permute([0, 1, 4, 5, 2, 3])
-            .reshape([n, c * kh * kw, ho * wo])
+        unfolded_patches(x, &geometry)
     };
     // W [C_out, C·kh·kw] times each frame's patches: the output comes out contiguous in NCHW
     // order, as the next conv reads it.
@@ -390,6 +385,30 @@ struct PatchGeometry {
     padding: [usize; 2],
 }
 
+impl PatchGeometry {
+    /// The output grid [Ho, Wo] over an input of [H, W].
+    fn output(&self, [h, w]: [usize; 2]) -> [usize; 2] {
+        let ([kh, kw], [sh, sw], [ph, pw]) = (self.kernel, self.stride, self.padding);
+        [(h + 2 * ph - kh) / sh + 1, (w + 2 * pw - kw) / sw + 1]
+    }
+}
+
+/// The patches of [`conv_as_matmul`] as a strided view of the padded input, copied once (any
+/// backend; gradients flow through it).
+///
+/// # Shapes
+/// - x: `[N, C, H, W]` → `[N, C·kh·kw, Ho·Wo]`
+fn unfolded_patches(x: Tensor<4>, g: &PatchGeometry) -> Tensor<3> {
+    let [n, c, h, w] = x.dims();
+    let ([kh, kw], [sh, sw], [ph, pw]) = (g.kernel, g.stride, g.padding);
+    let [ho, wo] = g.output([h, w]);
+    x.pad([(ph, ph), (pw, pw)], PadMode::Constant(0.0)) // [N, C, H+2p, W+2p]
+        .unfold::<5, _>(2, kh, sh) // [N, C, Ho, W+2p, kh]
+        .unfold::<6, _>(3, kw, sw) // [N, C, Ho, Wo, kh, kw]
+        .permute([0, 1, 4, 5, 2, 3])
+        .reshape([n, c * kh * kw, ho * wo])
+}
+
 /// The patches of [`conv_as_matmul`] copied on the host, for a tensor on the CPU backend: flex's
 /// strided copy of the unfolded view took 57–79 ms for a t3 batch (128 frames, 64², 5×5 stride 2)
 /// where this loop takes a few; the same numbers (pure copies, zeros for the padding). The input
@@ -401,7 +420,7 @@ fn host_patches(x: Tensor<4>, g: &PatchGeometry) -> Tensor<3> {
     let device = x.device();
     let [n, c, h, w] = x.dims();
     let ([kh, kw], [sh, sw], [ph, pw]) = (g.kernel, g.stride, g.padding);
-    let (ho, wo) = ((h + 2 * ph - kh) / sh + 1, (w + 2 * pw - kw) / sw + 1);
+    let [ho, wo] = g.output([h, w]);
     let src = x
         .into_data()
         .convert::<f32>()
@@ -489,20 +508,15 @@ mod tests {
             (1, [8, 8], [3, 3], [3, 1], [0, 1]),
         ] {
             let x = Tensor::<4>::random([2, c, h, w], Distribution::Default, &device);
-            let (ho, wo) = ((h + 2 * ph - kh) / sh + 1, (w + 2 * pw - kw) / sw + 1);
-            let want = x
-                .clone()
-                .pad([(ph, ph), (pw, pw)], PadMode::Constant(0.0))
-                .unfold::<5, _>(2, kh, sh)
-                .unfold::<6, _>(3, kw, sw)
-                .permute([0, 1, 4, 5, 2, 3])
-                .reshape([2, c * kh * kw, ho * wo]);
             let geometry = PatchGeometry {
                 kernel: [kh, kw],
                 stride: [sh, sw],
                 padding: [ph, pw],
             };
+            let [ho, wo] = geometry.output([h, w]);
+            let want = unfolded_patches(x.clone(), &geometry);
             let got = host_patches(x, &geometry);
+            assert_eq!(got.dims(), [2, c * kh * kw, ho * wo]);
             assert_eq!(got.dims(), want.dims());
             got.into_data().assert_eq(&want.into_data(), true);
         }
