@@ -253,6 +253,10 @@ struct EvalArgs {
     /// of a chunk open-loop, openpi's replan steps).
     #[arg(long, default_value = "first")]
     execute: eval::policy::Execution,
+    /// Ignore the model's termination head (models trained with `train.loss_weights.done`):
+    /// by default the robot is held still once the head says done for a few steps in a row.
+    #[arg(long)]
+    no_stop: bool,
     /// No progress bar.
     #[arg(long)]
     quiet: bool,
@@ -304,6 +308,7 @@ struct Setup {
     tasks: String,
     out: PathBuf,
     execute: eval::policy::Execution,
+    stop: bool,
 }
 
 fn setup(args: &EvalArgs) -> anyhow::Result<Setup> {
@@ -384,6 +389,7 @@ fn setup(args: &EvalArgs) -> anyhow::Result<Setup> {
         tasks,
         out,
         execute: args.execute,
+        stop: !args.no_stop,
     })
 }
 
@@ -399,7 +405,8 @@ fn make_policy(s: &Setup) -> Result<Box<dyn Policy>, EvalError> {
                     .ok_or_else(|| EvalError::Argument("no run".into()))?,
                 &s.device,
             )?
-            .with_execution(s.execute),
+            .with_execution(s.execute)
+            .with_stop(s.stop),
         ),
         PolicyKind::Expert => Box::new(eval::ExpertPolicy::default()),
         PolicyKind::Random => Box::new(eval::RandomPolicy::default()),
@@ -479,8 +486,9 @@ fn run_tasks(
     results.policy = s.policy_name();
     results.run = s.run.as_ref().map(|r| r.dir.display().to_string());
     results.checkpoint_step = s.run.as_ref().map(|r| r.step);
-    if s.kind == PolicyKind::Model && s.execute != eval::policy::Execution::First {
-        results.execution = Some(s.execute.to_string());
+    if s.kind == PolicyKind::Model && (s.execute != eval::policy::Execution::First || !s.stop) {
+        let stop = if s.stop { "" } else { ", no stop" };
+        results.execution = Some(format!("{}{stop}", s.execute));
     }
     Ok(results)
 }

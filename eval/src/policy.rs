@@ -219,6 +219,79 @@ pub struct ModelPolicy {
     objects: ObjectReader,
     execution: Execution,
     recent: std::collections::VecDeque<Vec<Vec<f32>>>,
+    stop: StopLatch,
+}
+
+/// The termination head's probability above which a step counts as "done".
+pub const STOP_PROBABILITY: f32 = 0.5;
+/// Consecutive "done" steps after which the policy holds the robot still for the rest of the
+/// episode.
+pub const STOP_STEPS: usize = 3;
+
+/// What a model with a termination head does with its "done" probabilities: once
+/// [`STOP_STEPS`] steps in a row exceed [`STOP_PROBABILITY`], the latch closes and stays closed
+/// until the next episode; the policy then commands no motion and keeps the gripper as it was.
+#[derive(Clone, Debug, PartialEq)]
+pub struct StopLatch {
+    /// Whether the latch is used at all (`eval --no-stop` turns it off).
+    pub enabled: bool,
+    /// "Done" steps in a row so far.
+    run: usize,
+    /// The gripper command held once stopped; `Some` once the latch closed.
+    held: Option<f32>,
+    /// The gripper command of the latest executed action.
+    gripper: f32,
+}
+
+impl Default for StopLatch {
+    fn default() -> Self {
+        StopLatch {
+            enabled: true,
+            run: 0,
+            held: None,
+            gripper: -1.0,
+        }
+    }
+}
+
+impl StopLatch {
+    /// Forgets the episode (keeps `enabled`).
+    pub fn reset(&mut self) {
+        *self = StopLatch {
+            enabled: self.enabled,
+            ..StopLatch::default()
+        };
+    }
+
+    /// Whether the latch has closed.
+    pub fn stopped(&self) -> bool {
+        self.held.is_some()
+    }
+
+    /// The action executed this step: `action` (the policy's) while open, else no motion with
+    /// the held gripper; `done` is this step's termination probability (None: no head).
+    pub fn apply(&mut self, action: [f32; 7], done: Option<f32>) -> [f32; 7] {
+        if self.enabled
+            && self.held.is_none()
+            && let Some(p) = done
+        {
+            self.run = if p > STOP_PROBABILITY {
+                self.run + 1
+            } else {
+                0
+            };
+            if self.run >= STOP_STEPS {
+                self.held = Some(self.gripper);
+            }
+        }
+        match self.held {
+            Some(g) => [0.0, 0.0, 0.0, 0.0, 0.0, 0.0, g],
+            None => {
+                self.gripper = action[6];
+                action
+            }
+        }
+    }
 }
 
 impl ModelPolicy {
@@ -226,6 +299,18 @@ impl ModelPolicy {
     pub fn with_execution(mut self, execution: Execution) -> Self {
         self.execution = execution;
         self
+    }
+
+    /// The same policy with its termination head's stop latch on or off (on by default; no
+    /// effect on a model without the head).
+    pub fn with_stop(mut self, stop: bool) -> Self {
+        self.stop.enabled = stop;
+        self
+    }
+
+    /// Whether the stop latch has closed in this episode (the robot is held still).
+    pub fn stopped(&self) -> bool {
+        self.stop.stopped()
     }
 
     /// Wraps a loaded model with its run's processor.
@@ -246,6 +331,7 @@ impl ModelPolicy {
             objects: ObjectReader::default(),
             execution: Execution::First,
             recent: std::collections::VecDeque::new(),
+            stop: StopLatch::default(),
         })
     }
 
@@ -286,6 +372,7 @@ impl ModelPolicy {
         self.seed = seed;
         self.objects = ObjectReader::default();
         self.recent.clear();
+        self.stop.reset();
     }
 
     /// The whole action chunk for one step's observation, each action un-normalised and
@@ -293,7 +380,7 @@ impl ModelPolicy {
     pub fn act_chunk(&mut self, step: &model::StepObservation) -> Result<Vec<[f32; 7]>, EvalError> {
         let input = self.processor.step(step, self.policy.device())?;
         let chunk = self.policy.act_input(input)?;
-        chunk
+        let chunk: Vec<[f32; 7]> = chunk
             .into_iter()
             .map(|a| {
                 let a: [f32; 7] = a
@@ -302,7 +389,17 @@ impl ModelPolicy {
                     .map_err(|_| EvalError::Model("the model returned no 7-D action".into()))?;
                 Ok(finish_action(self.processor.unnormalize(a)))
             })
-            .collect()
+            .collect::<Result<_, EvalError>>()?;
+        // The stop latch counts requests here (one per returned chunk); once closed, every
+        // action of the chunk holds still.
+        let done = self.policy.last_done()?;
+        let first = chunk.first().copied().unwrap_or([0.0; 7]);
+        let held = self.stop.apply(first, done);
+        Ok(if self.stop.stopped() {
+            vec![held; chunk.len()]
+        } else {
+            chunk
+        })
     }
 
     /// The number of subgoals done that the progress head reads off the latest frame (its most
@@ -382,7 +479,9 @@ impl Policy for ModelPolicy {
         let action: [f32; 7] = execute(self.execution, &mut self.recent, chunk)
             .and_then(|a| a.as_slice().try_into().ok())
             .ok_or_else(|| EvalError::Model("the model returned no 7-D action".into()))?;
-        Ok(finish_action(self.processor.unnormalize(action)))
+        let action = finish_action(self.processor.unnormalize(action));
+        let done = self.policy.last_done()?;
+        Ok(self.stop.apply(action, done))
     }
 
     fn needs_images(&self) -> bool {
@@ -403,6 +502,42 @@ impl Policy for ModelPolicy {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The stop latch: closes after STOP_STEPS "done" steps in a row (a dip resets the count),
+    /// then holds still with the gripper of the last executed action until reset; off or
+    /// without a head it passes actions through.
+    #[test]
+    fn stop_latch_holds_after_consecutive_done_steps() {
+        let act = |g: f32| [0.5, -0.5, 0.1, 0.0, 0.0, 0.2, g];
+        let mut latch = StopLatch::default();
+        assert_eq!(latch.apply(act(1.0), Some(0.9)), act(1.0));
+        assert_eq!(latch.apply(act(1.0), Some(0.9)), act(1.0));
+        // A dip below the threshold starts the count again.
+        assert_eq!(latch.apply(act(-1.0), Some(0.2)), act(-1.0));
+        assert_eq!(latch.apply(act(-1.0), Some(0.9)), act(-1.0));
+        assert_eq!(latch.apply(act(-1.0), Some(0.9)), act(-1.0));
+        assert!(!latch.stopped());
+        // The third in a row closes it: no motion, the previous step's gripper (open).
+        let hold = [0.0, 0.0, 0.0, 0.0, 0.0, 0.0, -1.0];
+        assert_eq!(latch.apply(act(1.0), Some(0.9)), hold);
+        assert!(latch.stopped());
+        // Closed whatever the head says next.
+        assert_eq!(latch.apply(act(1.0), Some(0.0)), hold);
+        latch.reset();
+        assert!(!latch.stopped() && latch.enabled);
+        assert_eq!(latch.apply(act(1.0), Some(0.1)), act(1.0));
+        // Off, or no head: never stops.
+        let mut off = StopLatch {
+            enabled: false,
+            ..StopLatch::default()
+        };
+        let mut none = StopLatch::default();
+        for _ in 0..10 {
+            assert_eq!(off.apply(act(1.0), Some(1.0)), act(1.0));
+            assert_eq!(none.apply(act(1.0), None), act(1.0));
+        }
+        assert!(!off.stopped() && !none.stopped());
+    }
 
     /// A chunk of `h` one-dimensional actions `base + i`.
     fn chunk(base: f32, h: usize) -> Vec<Vec<f32>> {

@@ -64,6 +64,7 @@ fn window_batch(cfg: &ModelConfig, images: Tensor<5>, device: &Device) -> Window
         subgoal: None,
         pointer_target: None,
         progress: None,
+        done: None,
     }
 }
 
@@ -211,6 +212,7 @@ fn full_memory_child(t: usize) {
         subgoal: None,
         pointer_target: None,
         progress: None,
+        done: None,
     };
     let base = proc_status_bytes("VmRSS:").unwrap_or(0);
     let start = Instant::now();

@@ -224,6 +224,7 @@ fn main() {
             subgoal: None,
             pointer_target: None,
             progress: None,
+            done: None,
         };
     let mut held = Rng(seed ^ 0xdead_beef);
     let hb = 256;

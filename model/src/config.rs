@@ -357,6 +357,13 @@ pub struct LossConfig {
     /// builds no head.
     #[serde(default)]
     pub progress: f64,
+    /// λ_done: weight of the termination head's binary cross-entropy to whether the episode's
+    /// goal is done (every subgoal satisfied, as recorded in `/goal`), read off the decoder's
+    /// action queries, so with the instruction (RT-1's "terminate" output). The evaluator holds
+    /// the robot still once the head says done for a few steps in a row. 0, the default, builds
+    /// no head.
+    #[serde(default)]
+    pub done: f64,
     /// Contrastive temperature τ.
     pub tau: f64,
     /// Hidden width of the spatial-broadcast slot decoder.
@@ -460,6 +467,7 @@ impl ModelConfig {
                 gripper: 1.0,
                 pointer: 0.0,
                 progress: 0.0,
+                done: 0.0,
                 tau: 1.0,
                 sa_hidden: 64,
             },
@@ -532,6 +540,7 @@ impl ModelConfig {
                 gripper: 1.0,
                 pointer: 0.0,
                 progress: 0.0,
+                done: 0.0,
                 tau: 1.0,
                 sa_hidden: 1024,
             },
@@ -748,6 +757,9 @@ impl ModelConfig {
         }
         if !(self.loss.progress >= 0.0 && self.loss.progress.is_finite()) {
             return err("loss.progress must be a finite number ≥ 0".into());
+        }
+        if !(self.loss.done >= 0.0 && self.loss.done.is_finite()) {
+            return err("loss.done must be a finite number ≥ 0".into());
         }
         if let Observation::State {
             tokens,

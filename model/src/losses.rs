@@ -64,6 +64,21 @@ pub fn pointer_ce(weights: Tensor<4>, target: Tensor<3>, frame_mask: Tensor<2>) 
     -(logp * target).sum() / den
 }
 
+/// Termination loss: binary cross-entropy of the termination head's logits to each frame's
+/// "goal done" target (0 or 1), averaged over the valid frames; computed in the stable form
+/// max(x, 0) − x·y + ln(1 + e^(−|x|)).
+///
+/// # Shapes
+/// - logits, target, frame_mask: `[B, T]` → `[1]`
+pub fn done_bce(logits: Tensor<2>, target: Tensor<2>, frame_mask: Tensor<2>) -> Tensor<1> {
+    let [b, t] = logits.dims();
+    assert_shape!(target, [b, t]);
+    assert_shape!(frame_mask, [b, t]);
+    let soft = logits.clone().abs().neg().exp().log1p();
+    let bce = logits.clone().clamp_min(0.0) - logits * target + soft;
+    masked_mean(bce, frame_mask)
+}
+
 /// Progress loss: cross-entropy of the progress head's logits to each frame's number of subgoals
 /// done, averaged over the valid frames.
 ///
@@ -313,6 +328,24 @@ mod tests {
         let want = (3f64.ln() + (2.0 + 5f64.exp()).ln()) / 3.0;
         let got = scalar(progress_ce(logits, target, all));
         assert!((got - want).abs() < 1e-4, "{got} vs {want}");
+    }
+
+    #[test]
+    fn done_bce_is_the_mean_binary_nll_of_the_valid_frames() {
+        let (_guard, device) = test_device();
+        // Frame 0: logit 0 (p = ½), target 1; frame 1: logit 30 (sure), target 1;
+        // frame 2: logit −2, target 0; frame 3: padding with a huge logit on the wrong side.
+        let logits = Tensor::<2>::from_floats([[0.0, 30.0, -2.0, 1e4]], &device);
+        let target = Tensor::<2>::from_floats([[1.0, 1.0, 0.0, 0.0]], &device);
+        let mask = Tensor::<2>::from_floats([[1.0, 1.0, 1.0, 0.0]], &device);
+        let want = (2f64.ln() + (1.0 + (-30f64).exp()).ln() + (1.0 + (-2f64).exp()).ln()) / 3.0;
+        let got = scalar(done_bce(logits.clone(), target.clone(), mask));
+        assert!((got - want).abs() < 1e-5, "{got} vs {want}");
+        // The padded frame counted: −ln σ(−10⁴) = 10⁴ joins the mean, finite.
+        let all = Tensor::<2>::ones([1, 4], &device);
+        let got = scalar(done_bce(logits, target, all));
+        let want = (want * 3.0 + 1e4) / 4.0;
+        assert!((got - want).abs() < 1e-2, "{got} vs {want}");
     }
 
     #[test]

@@ -43,6 +43,9 @@ pub struct WindowBatch {
     /// Each frame's number of subgoals done (as observed before its action), clamped to the
     /// progress head's classes `[B, T]`; read by the progress loss.
     pub progress: Option<Tensor<2, Int>>,
+    /// 1 where a frame's goal is done (every subgoal satisfied, as observed before its action),
+    /// else 0 `[B, T]`; read by the termination loss.
+    pub done: Option<Tensor<2>>,
 }
 
 /// Everything the window forward computes.
@@ -64,6 +67,8 @@ pub struct WindowOutput {
     pub pointer: Option<Tensor<4>>,
     /// The progress head's logits over the subgoals done `[B, T, C]` (with `loss.progress` > 0).
     pub progress: Option<Tensor<3>>,
+    /// The termination head's logits (goal done) `[B, T]` (with `loss.done` > 0).
+    pub done: Option<Tensor<2>>,
 }
 
 /// The losses of a window batch; `None` where the variant has no such term.
@@ -83,6 +88,8 @@ pub struct Losses {
     pub pointer: Option<Tensor<1>>,
     /// L_prog `[1]`: the progress head's cross-entropy to the subgoals done.
     pub progress: Option<Tensor<1>>,
+    /// L_done `[1]`: the termination head's binary cross-entropy to the goal being done.
+    pub done: Option<Tensor<1>>,
 }
 
 /// The policy network of any variant: the shared encoder, language and decoder around the
@@ -106,6 +113,9 @@ pub struct PolicyModel {
     /// With `decoder.belief`: the map of the progress head's distribution to the belief token,
     /// [`crate::heads::PROGRESS_CLASSES`] → D_dec.
     pub belief: Option<Linear>,
+    /// Termination head (with `loss.done` > 0): the mean of the decoder's action-query outputs
+    /// → one logit that the goal is done, `[D_dec, 1]`.
+    pub done: Option<Linear>,
     /// The configuration this model was built from.
     #[module(skip)]
     pub config: ModelConfig,
@@ -146,6 +156,7 @@ impl PolicyModel {
                 .decoder
                 .belief
                 .then(|| LinearConfig::new(crate::heads::PROGRESS_CLASSES, w).init(device)),
+            done: (config.loss.done > 0.0).then(|| LinearConfig::new(w, 1).init(device)),
             config: config.clone(),
         })
     }
@@ -168,6 +179,17 @@ impl PolicyModel {
     /// The modules the variant reads but does not own.
     pub(crate) fn shared(&self) -> (Tensor<2>, &TextEncoder) {
         (self.token_type.val(), &self.text)
+    }
+
+    /// The termination head's logits from the decoder's action-query outputs (None without the
+    /// head).
+    ///
+    /// # Shapes
+    /// - queries: `[N, Q, D_dec]` → `[N]`
+    pub(crate) fn done_logits(&self, queries: Tensor<3>) -> Option<Tensor<1>> {
+        let head = self.done.as_ref()?;
+        let [n, _, _] = queries.dims();
+        Some(head.forward(queries.mean_dim(1)).reshape([n]))
     }
 
     /// With `decoder.belief`, the visual tokens with the belief token before them: the progress
@@ -292,6 +314,9 @@ impl PolicyModel {
             ])
         });
         let dec = self.decode(win.tokens, win.pad, instr, state)?;
+        let done = self
+            .done_logits(dec.queries.clone())
+            .map(|d| d.reshape([b, t]));
         let (ha, a) = (cfg.decoder.horizon, cfg.decoder.action_dim);
         let parts = win.parts;
         let out = WindowOutput {
@@ -308,6 +333,7 @@ impl PolicyModel {
                 p.reshape([b, t, ha, k])
             }),
             progress,
+            done,
         };
         Ok((out, win.carry))
     }
@@ -452,6 +478,22 @@ impl PolicyModel {
         if let Some(l) = &progress {
             total = total + l.clone().mul_scalar(cfg.loss.progress);
         }
+        let done = match (&out.done, &batch.done) {
+            (Some(logits), Some(target)) => Some(losses::done_bce(
+                logits.clone(),
+                target.clone(),
+                batch.frame_mask.clone(),
+            )),
+            (Some(_), None) => {
+                return Err(ModelError::Input(
+                    "loss.done > 0, and the batch carries no goal-done targets".into(),
+                ));
+            }
+            _ => None,
+        };
+        if let Some(l) = &done {
+            total = total + l.clone().mul_scalar(cfg.loss.done);
+        }
         Ok((
             out,
             Losses {
@@ -462,6 +504,7 @@ impl PolicyModel {
                 slot_recon,
                 pointer,
                 progress,
+                done,
             },
             carry,
         ))
@@ -528,6 +571,7 @@ mod tests {
             subgoal: Some(subgoal.into()),
             pointer_target: None,
             progress: None,
+            done: None,
         }
     }
 
@@ -834,6 +878,64 @@ mod tests {
         }
     }
 
+    /// The termination head: built only with λ_done > 0, refused a batch without targets, its
+    /// loss in the total with its weight, reaching the decoder and the memory below it; streamed,
+    /// its probability equals the window forward's frame by frame.
+    #[test]
+    fn termination_head_reads_the_queries_and_reaches_the_memory() {
+        {
+            let (_guard, device) = test_autodiff_device();
+            device.seed(5);
+            let (b, t) = (2, 4);
+            let plain = micro("e_slotssm");
+            let model = PolicyModel::new(&plain, &device).unwrap();
+            assert!(model.done.is_none());
+            let (out, losses) = model.forward(&batch(&plain, b, t, &device)).unwrap();
+            assert!(out.done.is_none() && losses.done.is_none());
+            for name in ["e_slotssm", "slotvla_h8"] {
+                let mut cfg = micro(name);
+                cfg.loss.done = 0.25;
+                let model = PolicyModel::new(&cfg, &device).unwrap();
+                let mut x = batch(&cfg, b, t, &device);
+                let err = model.forward(&x).unwrap_err().to_string();
+                assert!(err.contains("no goal-done targets"), "{name}: {err}");
+                x.done = Some(Tensor::from_floats(
+                    [[0.0, 0.0, 0.0, 1.0], [0.0, 1.0, 1.0, 1.0]],
+                    &device,
+                ));
+                let (out, losses) = model.forward(&x).unwrap();
+                assert_eq!(out.done.as_ref().map(|d| d.dims()), Some([b, t]), "{name}");
+                let done = scalar(losses.done.clone().expect("L_done"));
+                // An untrained head sits near p = ½: the BCE near ln 2.
+                assert!((done - 2f32.ln()).abs() < 0.2, "{name}: {done}");
+                let want = scalar(losses.action.clone()) + 0.25 * done + slot_terms(&losses, &cfg);
+                let total = scalar(losses.total.clone());
+                assert!((total - want).abs() < 1e-4, "{name}: {total} vs {want}");
+                // L_done alone moves the head, the decoder and the memory below the tokens.
+                let grads = losses.done.unwrap().backward();
+                let check = GradCheck::run(&model, &grads);
+                let moved = |part: &str| !check.bad.iter().any(|p| p.starts_with(part));
+                assert!(
+                    moved("done") && moved("decoder.queries"),
+                    "{name}: {:?}",
+                    check.bad
+                );
+                if name == "e_slotssm" {
+                    assert!(
+                        !check.bad.iter().any(|p| p.contains("slot_ssm")),
+                        "{name}: {:?}",
+                        check.bad
+                    );
+                }
+            }
+        }
+        for name in ["e_slotssm", "slotvla_h3"] {
+            let mut cfg = micro(name);
+            cfg.loss.done = 1.0;
+            streaming_equals_window(cfg, 10);
+        }
+    }
+
     /// The belief token: the decoder reads the progress head's distribution (detached), so the
     /// action loss moves its map but never the progress head through it; a belief without the
     /// progress loss is refused; the streamed policy reads the same belief as the window forward.
@@ -937,6 +1039,13 @@ mod tests {
             .predict(images.clone(), instr.clone(), Some(subgoal.clone().into()))
             .unwrap();
         let full = out.actions;
+        // The termination head's probability per frame `[T]` (models with the head).
+        let done: Option<Vec<f32>> = out.done.map(|d| {
+            burn::tensor::activation::sigmoid(d)
+                .into_data()
+                .try_to_vec::<f32>()
+                .unwrap()
+        });
         // The progress head's distribution per frame `[T, C]` (models with the head).
         let progress = out.progress.map(|p| {
             let c = p.dims()[2];
@@ -946,6 +1055,9 @@ mod tests {
         assert!(policy.last_progress().unwrap().is_none());
         let mut worst = 0.0f32;
         let mut worst_progress = 0.0f32;
+        let mut worst_done = 0.0f32;
+        assert!(policy.last_done().unwrap().is_none());
+        assert_eq!(policy.has_done_head(), done.is_some());
         for t in 0..frames {
             let img = images.clone().narrow(1, t, 1).squeeze_dim::<4>(1);
             let sg = subgoal.clone().narrow(1, t, 1).squeeze_dim::<3>(1);
@@ -967,7 +1079,17 @@ mod tests {
                 (None, None) => {}
                 _ => panic!("the window forward and the stream disagree on the progress head"),
             }
+            match (&done, policy.last_done().unwrap()) {
+                (Some(d), Some(got)) => worst_done = worst_done.max((d[t] - got).abs()),
+                (None, None) => {}
+                _ => panic!("the window forward and the stream disagree on the termination head"),
+            }
         }
+        assert!(
+            worst_done < 1e-5,
+            "{}: termination max diff {worst_done}",
+            cfg.variant.name()
+        );
         assert!(worst < 1e-4, "{}: max diff {worst}", cfg.variant.name());
         assert!(
             worst_progress < 1e-4,
@@ -1159,6 +1281,7 @@ mod tests {
             subgoal: None,
             pointer_target: None,
             progress: None,
+            done: None,
         };
         let whole = WindowBatch {
             subgoal: None,

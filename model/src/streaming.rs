@@ -22,6 +22,9 @@ struct StreamState {
     /// The latest frame's visual tokens `[1, V, D_dec]`, kept for the progress head (models
     /// trained with the progress loss; read on demand, off the step's path).
     last_tokens: Option<Tensor<3>>,
+    /// The termination head's logit at the latest decoded step `[1]` (models trained with the
+    /// termination loss).
+    last_done: Option<Tensor<1>>,
 }
 
 /// A policy used step by step; its state lives inside and is reset per episode.
@@ -93,6 +96,24 @@ impl StreamingPolicy {
             .try_to_vec::<f32>()
             .map(Some)
             .map_err(|e| ModelError::Input(format!("progress head: {e:?}")))
+    }
+
+    /// The termination head's probability that the goal is done, read off the latest decoded
+    /// step's action queries (models trained with `loss.done` > 0); `None` before the first
+    /// decoded step or without the head.
+    pub fn last_done(&self) -> Result<Option<f32>> {
+        let Some(logit) = &self.state.last_done else {
+            return Ok(None);
+        };
+        burn::tensor::activation::sigmoid(logit.clone())
+            .try_into_scalar::<f32>()
+            .map(Some)
+            .map_err(|e| ModelError::Input(format!("termination head: {e:?}")))
+    }
+
+    /// Whether the model has a termination head.
+    pub fn has_done_head(&self) -> bool {
+        self.model.done.is_some()
     }
 
     /// Floats held in the carried state now (slots + SSM states + history tokens).
@@ -170,6 +191,7 @@ impl StreamingPolicy {
         let state = obs.state_tokens();
         let visual = self.advance(obs, subgoal)?;
         let out = self.model.decode(visual, None, instruction, state)?;
+        self.state.last_done = self.model.done_logits(out.queries.clone());
         let [_, ha, a] = out.actions.dims();
         Ok(out.actions.reshape([ha, a]))
     }

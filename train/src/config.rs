@@ -271,6 +271,11 @@ pub struct LossWeights {
     /// visual tokens (training only: the policy never observes it; needs `/goal`; default 0).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub progress: Option<f64>,
+    /// λ_done: the termination head's binary cross-entropy to whether the goal is done (read off
+    /// the decoder's action queries; the evaluator holds the robot still once the head says done;
+    /// needs `/goal`; default 0).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub done: Option<f64>,
 }
 
 /// `[train]`: optimisation, schedule, checkpoints, validation.
@@ -606,6 +611,7 @@ impl Config {
             ("gripper", w.gripper),
             ("pointer", w.pointer),
             ("progress", w.progress),
+            ("done", w.done),
         ] {
             if let Some(v) = v
                 && !finite_nonneg(v)
@@ -708,6 +714,9 @@ impl Config {
         }
         if let Some(v) = w.progress {
             cfg.loss.progress = v;
+        }
+        if let Some(v) = w.done {
+            cfg.loss.done = v;
         }
         cfg.text.vocab = vocab;
         if cfg.loss.pointer > 0.0 && !cfg.decoder.pointer {

@@ -607,7 +607,7 @@ pub fn state_spec(
 }
 
 /// Checks that every episode of the dataset records its goal progress (`/goal` with a known
-/// goal length), which an oracle variant and the progress loss read; the first that does not (e.g. imported from
+/// goal length), which an oracle variant and the progress and termination losses read; the first that does not (e.g. imported from
 /// RLDS, which has no subgoals) is named in the error.
 pub fn check_goals(data: &OpenedDataset) -> Result<()> {
     for (_, path, r) in data.episodes() {
@@ -618,7 +618,7 @@ pub fn check_goals(data: &OpenedDataset) -> Result<()> {
         let first = r.read_raw_steps(0..1.min(r.len()))?;
         if !has_channel || first.first().is_none_or(|s| s.progress.total == 0) {
             return Err(TrainError::Usage(format!(
-                "{}: the oracle variant and train.loss_weights.progress read the goal progress, \
+                "{}: the oracle variant and train.loss_weights.progress / done read the goal progress, \
                  and this episode's /goal records none (no subgoals: recorded without a goal \
                  tracker, or imported)",
                 path.display()

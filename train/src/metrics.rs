@@ -35,6 +35,9 @@ pub struct Record {
     /// L_prog (with λ_prog > 0).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub progress: Option<f64>,
+    /// L_done (with λ_done > 0).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub done: Option<f64>,
     /// Global gradient norm before clipping.
     #[serde(default)]
     pub grad_norm: f64,
@@ -69,6 +72,7 @@ impl Record {
             ("slot_recon", self.slot_recon),
             ("pointer", self.pointer),
             ("progress", self.progress),
+            ("done", self.done),
         ] {
             if let Some(x) = x {
                 v.push((n, x));

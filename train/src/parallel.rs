@@ -77,6 +77,7 @@ pub fn mean_record(mut recs: Vec<(Record, f64)>) -> Record {
     out.slot_recon = opt(&|r| r.slot_recon);
     out.pointer = opt(&|r| r.pointer);
     out.progress = opt(&|r| r.progress);
+    out.done = opt(&|r| r.done);
     for (r, _) in &recs {
         out.forward_s = out.forward_s.max(r.forward_s);
         out.backward_s = out.backward_s.max(r.backward_s);

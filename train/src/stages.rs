@@ -36,7 +36,7 @@ pub struct Stage {
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub steps: Option<u64>,
     /// Loss terms summed (with their λ) into this stage's total: `action`, `contrastive`,
-    /// `window`, `slot_recon`, `pointer`, `progress`.
+    /// `window`, `slot_recon`, `pointer`, `progress`, `done`.
     pub losses: Vec<String>,
     /// Model parts whose weights stay fixed, by module name anywhere in the model tree
     /// (`encoder`, `slot_attention`, `slot_ssm`, `window_head`, `fusion`, `relation`,
@@ -60,13 +60,14 @@ pub fn idle_tail(stages: &[Stage], step: u64) -> bool {
 }
 
 /// Loss terms a stage may switch on.
-pub const LOSSES: [&str; 6] = [
+pub const LOSSES: [&str; 7] = [
     "action",
     "contrastive",
     "window",
     "slot_recon",
     "pointer",
     "progress",
+    "done",
 ];
 
 /// The stage of step `step` (steps done so far, 0-based): stages follow each other for their
@@ -121,6 +122,7 @@ fn term<'a>(name: &str, losses: &'a Losses, weights: &LossConfig) -> Option<(&'a
         "slot_recon" => (losses.slot_recon.as_ref(), weights.slot_recon),
         "pointer" => (losses.pointer.as_ref(), weights.pointer),
         "progress" => (losses.progress.as_ref(), weights.progress),
+        "done" => (losses.done.as_ref(), weights.done),
         _ => (None, 0.0),
     };
     term.map(|t| (t, w))
@@ -287,6 +289,7 @@ mod tests {
             slot_recon: None,
             pointer: None,
             progress: None,
+            done: None,
         };
         let weights = |contrastive: f64| LossConfig {
             action: 1.0,

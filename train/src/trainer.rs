@@ -129,6 +129,7 @@ fn record(step: u64, l: &Losses) -> Result<Record> {
         slot_recon: opt(&l.slot_recon)?,
         pointer: opt(&l.pointer)?,
         progress: opt(&l.progress)?,
+        done: opt(&l.done)?,
         grad_norm: 0.0,
         time_s: 0.0,
         data_s: 0.0,
@@ -188,6 +189,7 @@ pub fn validate(
                 slot_recon: r.slot_recon.map(|x| w * x),
                 pointer: r.pointer.map(|x| w * x),
                 progress: r.progress.map(|x| w * x),
+                done: r.done.map(|x| w * x),
                 ..r
             },
             Some(s) => Record {
@@ -198,6 +200,7 @@ pub fn validate(
                 slot_recon: add(s.slot_recon, r.slot_recon),
                 pointer: add(s.pointer, r.pointer),
                 progress: add(s.progress, r.progress),
+                done: add(s.done, r.done),
                 ..s
             },
         });
@@ -211,6 +214,7 @@ pub fn validate(
         slot_recon: s.slot_recon.map(|x| x / batches),
         pointer: s.pointer.map(|x| x / batches),
         progress: s.progress.map(|x| x / batches),
+        done: s.done.map(|x| x / batches),
         ..s
     }))
 }
@@ -263,7 +267,7 @@ pub fn open_data(cfg: &Config) -> Result<(ModelConfig, RunData)> {
     let opened = data::OpenedDataset::open(&cfg.data.dir)?;
     let vocab = RunData::model_vocab(&opened.index)?;
     let mut mcfg: ModelConfig = cfg.model_config(vocab).map_err(|m| config_error(cfg, m))?;
-    if mcfg.variant.needs_subgoal_text() || mcfg.loss.progress > 0.0 {
+    if mcfg.variant.needs_subgoal_text() || mcfg.loss.progress > 0.0 || mcfg.loss.done > 0.0 {
         crate::dataset::check_goals(&opened)?;
     }
     let state = match cfg.model.obs {

@@ -685,6 +685,24 @@ fn state_mode_on_data_without_poses_and_oracle_without_goal_exit_2() {
         e.to_string().contains("/goal") && e.to_string().contains("synth_000.mcap"),
         "{e}"
     );
+    // The termination loss reads /goal too: the same error; on episodes with goals it trains
+    // and logs L_done at every step.
+    let mut done = short_config(2, 2);
+    done.data.dir = stripped.clone();
+    done.train.loss_weights.done = Some(0.5);
+    let e = train::train(&done, &opts(&dir.path().join("run_done"))).unwrap_err();
+    assert_eq!(e.exit_code(), 2);
+    assert!(e.to_string().contains("/goal"), "{e}");
+    done.data.dir = dataset().to_path_buf();
+    let run_done = dir.path().join("run_done2");
+    train::train(&done, &opts(&run_done)).unwrap();
+    let recs = metrics::read(&run_done.join("metrics.jsonl")).unwrap();
+    assert_eq!(recs.len(), 2);
+    assert!(
+        recs.iter()
+            .all(|r| r.done.is_some_and(|d| d.is_finite() && d > 0.0)),
+        "{recs:?}"
+    );
     // Articulated parts asked of episodes that record poses but no parts (schema 2, or scenes
     // without drawers and knobs): one error naming the dataset and the key.
     let posed = dir.path().join("posed");

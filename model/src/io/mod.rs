@@ -622,6 +622,19 @@ impl Processor {
                 .collect();
             Tensor::from_data(TensorData::new(done, [b, t]), device)
         });
+        // Whether each frame's goal is done (every subgoal satisfied), the termination head's
+        // targets; windows without goal progress leave them out.
+        let done = samples.iter().all(|s| s.goals.len() >= t).then(|| {
+            let done: Vec<f32> = samples
+                .iter()
+                .flat_map(|s| {
+                    s.goals[..t]
+                        .iter()
+                        .map(|g| f32::from(u8::from(g.total > 0 && g.satisfied >= g.total)))
+                })
+                .collect();
+            Tensor::from_data(TensorData::new(done, [b, t]), device)
+        });
         Ok(WindowBatch {
             obs,
             actions: Tensor::from_data(TensorData::new(actions, [b, t, ha, 7]), device),
@@ -634,6 +647,7 @@ impl Processor {
             subgoal,
             pointer_target,
             progress,
+            done,
         })
     }
 
