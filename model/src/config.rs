@@ -315,6 +315,11 @@ pub struct DecoderConfig {
     /// Needs `loss.progress` > 0 (absent: false).
     #[serde(default)]
     pub belief: bool,
+    /// The termination head (`loss.done` > 0) reads the action queries detached: its loss then
+    /// trains the head alone and leaves what the decoder and the memory compute to the other
+    /// losses (absent: false, the loss reaches them).
+    #[serde(default)]
+    pub done_detach: bool,
 }
 
 /// Language: word-level tokenizer over a fixed vocabulary + learned embeddings (model.md §8).
@@ -454,6 +459,7 @@ impl ModelConfig {
                 pointer: false,
                 pointer_input_keys: false,
                 belief: false,
+                done_detach: false,
             },
             text: TextConfig {
                 vocab: Vec::new(),
@@ -527,6 +533,7 @@ impl ModelConfig {
                 pointer: false,
                 pointer_input_keys: false,
                 belief: false,
+                done_detach: false,
             },
             text: TextConfig {
                 vocab: Vec::new(),

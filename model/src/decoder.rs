@@ -392,6 +392,7 @@ mod tests {
             pointer: false,
             pointer_input_keys: false,
             belief: false,
+            done_detach: false,
         }
     }
 

@@ -189,7 +189,13 @@ impl PolicyModel {
     pub(crate) fn done_logits(&self, queries: Tensor<3>) -> Option<Tensor<1>> {
         let head = self.done.as_ref()?;
         let [n, _, _] = queries.dims();
-        Some(head.forward(queries.mean_dim(1)).reshape([n]))
+        let pooled = queries.mean_dim(1);
+        let pooled = if self.config.decoder.done_detach {
+            pooled.detach()
+        } else {
+            pooled
+        };
+        Some(head.forward(pooled).reshape([n]))
     }
 
     /// With `decoder.belief`, the visual tokens with the belief token before them: the progress
@@ -927,6 +933,20 @@ mod tests {
                         check.bad
                     );
                 }
+                // Detached, the same loss value trains the head alone.
+                let mut det = model.clone();
+                det.config.decoder.done_detach = true;
+                let (_, losses) = det.forward(&x).unwrap();
+                assert_eq!(scalar(losses.done.clone().unwrap()), done, "{name}");
+                let grads = losses.done.unwrap().backward();
+                let check = GradCheck::run(&det, &grads);
+                assert!(
+                    check.bad.iter().all(|p| !p.starts_with("done"))
+                        && check.bad.iter().any(|p| p.starts_with("decoder"))
+                        && check.bad.iter().any(|p| p.starts_with("encoder")),
+                    "{name}: {:?}",
+                    check.bad
+                );
             }
         }
         for name in ["e_slotssm", "slotvla_h3"] {
