@@ -318,7 +318,7 @@ pub struct DecoderConfig {
     /// The termination head (`loss.done` > 0) reads the action queries detached: its loss then
     /// trains the head alone and leaves what the decoder and the memory compute to the other
     /// losses (absent: false, the loss reaches them).
-    #[serde(default)]
+    #[serde(default, skip_serializing_if = "is_false")]
     pub done_detach: bool,
 }
 
@@ -330,6 +330,16 @@ pub struct TextConfig {
     pub vocab: Vec<String>,
     /// Maximum tokens per text (longer texts are cut).
     pub max_len: usize,
+}
+
+/// Left out of a written config when 0 (so runs without the option read in older builds).
+fn is_zero(x: &f64) -> bool {
+    *x == 0.0
+}
+
+/// Left out of a written config when false (as [`is_zero`]).
+fn is_false(x: &bool) -> bool {
+    !*x
 }
 
 fn unit() -> f64 {
@@ -367,7 +377,7 @@ pub struct LossConfig {
     /// action queries, so with the instruction (RT-1's "terminate" output). The evaluator holds
     /// the robot still once the head says done for a few steps in a row. 0, the default, builds
     /// no head.
-    #[serde(default)]
+    #[serde(default, skip_serializing_if = "is_zero")]
     pub done: f64,
     /// Contrastive temperature τ.
     pub tau: f64,
@@ -849,6 +859,14 @@ mod tests {
         let json = serde_json::to_string(&cfg).unwrap();
         let back: ModelConfig = serde_json::from_str(&json).unwrap();
         assert_eq!(back, cfg);
+        // The termination options are written only when used (older builds read the rest).
+        assert!(!json.contains("done"), "{json}");
+        let mut with = cfg.clone();
+        with.loss.done = 0.5;
+        with.decoder.done_detach = true;
+        let with_json = serde_json::to_string(&with).unwrap();
+        assert!(with_json.contains("\"done\":0.5") && with_json.contains("\"done_detach\":true"));
+        assert_eq!(serde_json::from_str::<ModelConfig>(&with_json).unwrap(), with);
         let bad = json.replacen("\"image_size\"", "\"imagesize\"", 1);
         assert!(serde_json::from_str::<ModelConfig>(&bad).is_err());
         let v: Variant = serde_json::from_str(r#"{"kind": "slotvla", "history": 8}"#).unwrap();
