@@ -866,7 +866,10 @@ mod tests {
         with.decoder.done_detach = true;
         let with_json = serde_json::to_string(&with).unwrap();
         assert!(with_json.contains("\"done\":0.5") && with_json.contains("\"done_detach\":true"));
-        assert_eq!(serde_json::from_str::<ModelConfig>(&with_json).unwrap(), with);
+        assert_eq!(
+            serde_json::from_str::<ModelConfig>(&with_json).unwrap(),
+            with
+        );
         let bad = json.replacen("\"image_size\"", "\"imagesize\"", 1);
         assert!(serde_json::from_str::<ModelConfig>(&bad).is_err());
         let v: Variant = serde_json::from_str(r#"{"kind": "slotvla", "history": 8}"#).unwrap();
