@@ -16,12 +16,16 @@
 //! seed = 1000
 //! full_budget = true
 //!
+//! [recipes]                 # optional: named override lists that run groups share
+//! long = ["train.steps=40000", "train.ema=0.999"]
+//!
 //! [[runs]]
 //! obs = "state"
 //! suite = "libero_mem"      # the tasks evaluated (eval's --tasks syntax)
 //! config = "configs/state/libero_mem.toml"
 //! variants = ["e_slotssm_oracle", "e_slotssm", "slotvla_h1", "slotvla_h8", "dense"]
-//! # tag = "hold"          # optional: a recipe's name, `+hold` in the tables
+//! # tag = "hold"          # optional: the group's name, `+hold` in the tables
+//! # recipe = "long"       # optional: a `[recipes]` entry, its overrides before `set`'s
 //! # set = ["train.steps=8000"]   # optional: `train --set` overrides
 //! # seeds = [1, 2]        # optional: the same runs again at these `train.seed`s (`+seed1`, …)
 //! ```
@@ -58,6 +62,9 @@ pub struct Experiment {
     /// Folder of the run directories.
     #[serde(default = "runs_dir")]
     pub runs_dir: PathBuf,
+    /// Named lists of `train --set` overrides that run groups share (a group's `recipe`).
+    #[serde(default)]
+    pub recipes: BTreeMap<String, Vec<String>>,
     /// What to train and evaluate.
     pub runs: Vec<RunSpec>,
 }
@@ -90,6 +97,10 @@ pub struct RunSpec {
     /// Tag of the runs in the tables and their names (e.g. `windows` for an ablation).
     #[serde(default)]
     pub tag: Option<String>,
+    /// A `[recipes]` entry: its overrides are given to `train` before the group's own `set`
+    /// (once loaded, `set` holds both, the recipe's first).
+    #[serde(default)]
+    pub recipe: Option<String>,
     /// Further `KEY=VALUE` overrides given to `train --set`.
     #[serde(default)]
     pub set: Vec<String>,
@@ -200,6 +211,16 @@ pub struct RunResult {
     pub tasks: Vec<TaskSummary>,
 }
 
+impl RunResult {
+    /// Mean subgoal completion over its tasks, percent (0 without tasks).
+    pub fn mean_completion(&self) -> f64 {
+        if self.tasks.is_empty() {
+            return 0.0;
+        }
+        self.tasks.iter().map(|t| t.completion).sum::<f64>() / self.tasks.len() as f64
+    }
+}
+
 impl Experiment {
     /// Reads an experiment file (errors name the file and the key).
     pub fn load(path: &Path) -> Result<Experiment, EvalError> {
@@ -208,9 +229,25 @@ impl Experiment {
             message,
         };
         let text = std::fs::read_to_string(path).map_err(|e| bad(e.to_string()))?;
-        let x: Experiment = toml::from_str(&text).map_err(|e| bad(e.to_string()))?;
+        let mut x: Experiment = toml::from_str(&text).map_err(|e| bad(e.to_string()))?;
         if x.episodes == 0 || x.workers == 0 {
             return Err(bad("episodes and workers must be ≥ 1".into()));
+        }
+        for (i, r) in x.runs.iter_mut().enumerate() {
+            if let Some(name) = &r.recipe {
+                let Some(recipe) = x.recipes.get(name) else {
+                    let known: Vec<&str> = x.recipes.keys().map(String::as_str).collect();
+                    return Err(bad(format!(
+                        "runs[{i}].recipe: unknown recipe `{name}` (recipes: {})",
+                        if known.is_empty() {
+                            "none; define them under [recipes]".to_string()
+                        } else {
+                            known.join(", ")
+                        }
+                    )));
+                };
+                r.set = recipe.iter().chain(&r.set).cloned().collect();
+            }
         }
         for (i, r) in x.runs.iter().enumerate() {
             if r.obs != "state" && r.obs != "pixels" {
@@ -311,6 +348,22 @@ pub fn train_overrides(p: &Planned) -> Vec<String> {
     ];
     out.extend(p.spec.set.iter().cloned());
     out.extend(p.seed.map(|s| format!("train.seed={s}")));
+    out
+}
+
+/// The shell command that [`train`] runs for `p` (without `--threads`; recipes expanded), each
+/// override single-quoted: what `eval experiment --plan` prints, to run a group's member by hand.
+pub fn train_command(p: &Planned, runs_dir: &Path) -> String {
+    let quote = |s: &str| format!("'{}'", s.replace('\'', r"'\''"));
+    let mut out = format!(
+        "train {} --run-dir {}",
+        quote(&p.spec.config.display().to_string()),
+        quote(&runs_dir.join(&p.name).display().to_string())
+    );
+    for s in train_overrides(p) {
+        out.push_str(" --set ");
+        out.push_str(&quote(&s));
+    }
     out
 }
 
@@ -1164,6 +1217,7 @@ mod tests {
             full_budget: true,
             workers: 1,
             runs_dir: "runs".into(),
+            recipes: BTreeMap::new(),
             runs: vec![],
         }
     }
@@ -1433,6 +1487,93 @@ mod tests {
         assert!(
             err.ends_with("no run has tag = \"4k\" (modes: state; suites: libero_mem; tags: 40k)"),
             "{err}"
+        );
+    }
+
+    /// A group's recipe comes before its own `set` (later overrides win in `train`), groups
+    /// without one keep their own; an unknown recipe is an error naming the file and the group.
+    #[test]
+    fn recipes_expand_before_the_groups_own_overrides() {
+        let group = |tag: &str, recipe: &str, set: &str| {
+            format!(
+                "[[runs]]\nobs = \"state\"\nsuite = \"t1\"\nconfig = \"c\"\nvariants = [\"e_slotssm\"]\ntag = \"{tag}\"\n{}set = [{set}]\n",
+                if recipe.is_empty() {
+                    String::new()
+                } else {
+                    format!("recipe = \"{recipe}\"\n")
+                }
+            )
+        };
+        let (_dir, p) = experiment_file(&format!(
+            "name = \"x\"\nout = \"d\"\n[recipes]\nlong = [\"train.steps=40000\", \"train.ema=0.999\"]\nempty = []\n{}{}{}",
+            group("a", "long", "\"train.steps=10\""),
+            group("b", "empty", "\"a=1\""),
+            group("c", "", "\"b=2\"")
+        ));
+        let x = Experiment::load(&p).unwrap();
+        let sets: Vec<&[String]> = x.runs.iter().map(|r| r.set.as_slice()).collect();
+        assert_eq!(
+            sets,
+            [
+                &["train.steps=40000", "train.ema=0.999", "train.steps=10"][..],
+                &["a=1"][..],
+                &["b=2"][..]
+            ]
+        );
+        let plan = x.plan();
+        assert_eq!(
+            train_overrides(&plan[0])[2..],
+            ["train.steps=40000", "train.ema=0.999", "train.steps=10"]
+        );
+        assert_eq!(x.runs[0].recipe.as_deref(), Some("long"));
+        assert_eq!(
+            train_command(&plan[0], Path::new("runs")),
+            "train 'c' --run-dir 'runs/x_state_t1_e_slotssm_a' --set 'name=\"x_state_t1_e_slotssm_a\"' \
+             --set 'model.variant=\"e_slotssm\"' --set 'train.steps=40000' --set 'train.ema=0.999' \
+             --set 'train.steps=10'"
+        );
+        std::fs::write(
+            &p,
+            format!(
+                "name = \"x\"\nout = \"d\"\n[recipes]\nlong = []\n{}{}",
+                group("a", "", "\"b=2\""),
+                group("b", "lnog", "")
+            ),
+        )
+        .unwrap();
+        let e = Experiment::load(&p).unwrap_err().to_string();
+        assert!(
+            e.contains("x.toml")
+                && e.contains("runs[1].recipe: unknown recipe `lnog` (recipes: long)"),
+            "{e}"
+        );
+        std::fs::write(
+            &p,
+            format!("name = \"x\"\nout = \"d\"\n{}", group("a", "long", "")),
+        )
+        .unwrap();
+        let e = Experiment::load(&p).unwrap_err().to_string();
+        assert!(
+            e.contains(
+                "runs[0].recipe: unknown recipe `long` (recipes: none; define them under [recipes])"
+            ),
+            "{e}"
+        );
+        // A quote inside an override survives the shell quoting.
+        let mut spec = x.runs[2].clone();
+        spec.set = vec!["name=\"it's\"".into()];
+        let planned = Planned {
+            spec: &spec,
+            group: 2,
+            name: "n".into(),
+            variant: "dense".into(),
+            label: "dense".into(),
+            seed: None,
+        };
+        assert!(
+            train_command(&planned, Path::new("r")).ends_with(r#"--set 'name="it'\''s"'"#),
+            "{}",
+            train_command(&planned, Path::new("r"))
         );
     }
 

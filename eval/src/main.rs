@@ -93,6 +93,10 @@ enum Command {
         /// ledger OUT/runs.json (no training, no rollouts).
         #[arg(long)]
         tables_only: bool,
+        /// Only print the plan: every run (of --obs/--suite/--tag) with whether it is evaluated
+        /// already and the `train` command that trains it (recipes expanded); runs nothing.
+        #[arg(long, conflicts_with = "tables_only")]
+        plan: bool,
         /// No progress bar.
         #[arg(long)]
         quiet: bool,
@@ -279,6 +283,7 @@ fn main() -> ExitCode {
         Some(Command::Experiment {
             file,
             tables_only,
+            plan,
             quiet,
             jobs,
             obs,
@@ -286,7 +291,13 @@ fn main() -> ExitCode {
             tag,
         }) => experiment(
             &file,
-            tables_only,
+            if plan {
+                Mode::Plan
+            } else if tables_only {
+                Mode::TablesOnly
+            } else {
+                Mode::Run
+            },
             quiet,
             jobs as usize,
             &eval::experiment::Only { obs, suite, tag },
@@ -741,9 +752,20 @@ fn compare(paths: &[PathBuf], out: Option<PathBuf>) -> anyhow::Result<()> {
     Ok(())
 }
 
+/// What `eval experiment` does.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Mode {
+    /// Train, evaluate and write the tables.
+    Run,
+    /// Only rebuild the tables (`--tables-only`).
+    TablesOnly,
+    /// Only print the plan (`--plan`).
+    Plan,
+}
+
 fn experiment(
     file: &std::path::Path,
-    tables_only: bool,
+    mode: Mode,
     quiet: bool,
     jobs: usize,
     only: &eval::experiment::Only,
@@ -752,7 +774,8 @@ fn experiment(
     let x = Experiment::load(file)?;
     let plan = x.plan();
     only.check(&x, file)?;
-    let bar = if quiet {
+    let tables_only = mode == Mode::TablesOnly;
+    let bar = if quiet || mode == Mode::Plan {
         indicatif::ProgressBar::hidden()
     } else {
         indicatif::ProgressBar::new(plan.len() as u64)
@@ -814,6 +837,24 @@ fn experiment(
             "{recorded} evaluated runs read from {} (their run directories are not here)",
             exp::Ledger::path(&x).display()
         );
+    }
+    if mode == Mode::Plan {
+        for (p, r) in plan.iter().zip(&evaluated) {
+            if !only.admits(p.spec) {
+                continue;
+            }
+            let state = match r {
+                Some(r) => format!("evaluated ({:.1} % mean completion)", r.mean_completion()),
+                None => "to train and evaluate".to_string(),
+            };
+            println!(
+                "{} [{}] {state}\n  {}",
+                p.name,
+                p.label,
+                exp::train_command(p, &x.runs_dir)
+            );
+        }
+        return Ok(());
     }
     // With --jobs N, every run still to evaluate is trained first (N at once), then evaluated.
     let pretrained = jobs > 1 && !tables_only;

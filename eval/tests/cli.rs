@@ -374,6 +374,26 @@ fn experiment_tables_from_the_ledger_alone() {
     let back: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(out.join("runs.json")).unwrap()).unwrap();
     assert_eq!(back, ledger);
+    // --plan lists every run with its state and `train` command, and writes nothing.
+    std::fs::remove_file(out.join("results.md")).unwrap();
+    let (code, stdout, err) = eval(&["experiment", f, "--plan"]);
+    assert_eq!(code, 0, "{err}");
+    let runs = dir.path().join("runs");
+    assert_eq!(
+        stdout,
+        format!(
+            "x_state_t3_e_slotssm [e_slotssm] evaluated (66.7 % mean completion)\n  train \
+             'configs/state/t3.toml' --run-dir '{0}/x_state_t3_e_slotssm' --set \
+             'name=\"x_state_t3_e_slotssm\"' --set 'model.variant=\"e_slotssm\"'\n\
+             x_state_t3_slotvla_h1 [slotvla_h1] to train and evaluate\n  train \
+             'configs/state/t3.toml' --run-dir '{0}/x_state_t3_slotvla_h1' --set \
+             'name=\"x_state_t3_slotvla_h1\"' --set 'model.variant=\"slotvla_h1\"'\n",
+            runs.display()
+        )
+    );
+    assert!(!out.join("results.md").exists());
+    let (code, _, err) = eval(&["experiment", f, "--plan", "--tables-only"]);
+    assert_eq!(code, 2, "{err}");
     // Another protocol's ledger is not used (and the tables say the run is missing).
     std::fs::write(
         out.join("runs.json"),
