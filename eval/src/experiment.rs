@@ -848,23 +848,46 @@ fn memory_claim(mode: &str, by_variant: &[(&str, Vec<&TaskSummary>)], recipe: &s
         return String::new();
     }
     let r = recipe;
-    let comparisons = [
-        (
-            format!("e_slotssm{r} − slotvla_h1{r} (the claim)"),
-            "e_slotssm",
-            "slotvla_h1",
-        ),
-        (
-            format!("e_slotssm{r} − e_slotssm+windows{r} (carried memory vs independent windows)"),
-            "e_slotssm",
-            "e_slotssm+windows",
-        ),
-        (
-            format!("e_slotssm_oracle{r} − e_slotssm{r} (what the oracle label adds)"),
-            "e_slotssm_oracle",
-            "e_slotssm",
-        ),
-    ];
+    // The windows ablations of this recipe (`e_slotssm+windows{r}`, `e_slotssm+windows16{r}`, …),
+    // in first-seen order: each one row.
+    let mut ablations: Vec<String> = vec![];
+    for (label, _) in by_variant {
+        let label = strip_seed(label);
+        if let Some(w) = label
+            .strip_prefix("e_slotssm+windows")
+            .and_then(|x| x.strip_suffix(r))
+            .filter(|w| w.chars().all(|c| c.is_ascii_digit()))
+        {
+            let v = format!("e_slotssm+windows{w}");
+            if !ablations.contains(&v) {
+                ablations.push(v);
+            }
+        }
+    }
+    if ablations.is_empty() {
+        ablations.push("e_slotssm+windows".into());
+    }
+    let mut comparisons: Vec<(String, String, String)> = vec![(
+        format!("e_slotssm{r} − slotvla_h1{r} (the claim)"),
+        "e_slotssm".into(),
+        "slotvla_h1".into(),
+    )];
+    for v in ablations {
+        let frames = match v.strip_prefix("e_slotssm+windows") {
+            Some("") | None => String::new(),
+            Some(n) => format!(" of {n} frames"),
+        };
+        comparisons.push((
+            format!("e_slotssm{r} − {v}{r} (carried memory vs independent windows{frames})"),
+            "e_slotssm".into(),
+            v,
+        ));
+    }
+    comparisons.push((
+        format!("e_slotssm_oracle{r} − e_slotssm{r} (what the oracle label adds)"),
+        "e_slotssm_oracle".into(),
+        "e_slotssm".into(),
+    ));
     let title = if recipe.is_empty() {
         String::new()
     } else {
@@ -879,7 +902,7 @@ fn memory_claim(mode: &str, by_variant: &[(&str, Vec<&TaskSummary>)], recipe: &s
     // Every variant the comparisons read, once each, in order.
     let mut variants: Vec<&str> = vec![];
     for (_, a, b) in &comparisons {
-        for v in [*a, *b] {
+        for v in [a.as_str(), b.as_str()] {
             if !variants.contains(&v) {
                 variants.push(v);
             }
@@ -888,7 +911,7 @@ fn memory_claim(mode: &str, by_variant: &[(&str, Vec<&TaskSummary>)], recipe: &s
     table_header(&mut s, "comparison", &measured);
     // The claim's own margins (every measured task has both sides), per task.
     let mut margins: Vec<f64> = vec![];
-    for (i, (label, a, b)) in comparisons.into_iter().enumerate() {
+    for (i, (label, a, b)) in comparisons.iter().enumerate() {
         let cells: Vec<Option<(f64, f64)>> = measured
             .iter()
             .map(|t| {
@@ -1327,6 +1350,17 @@ mod tests {
                 "The claim holds on t3, t5 (every margin ≥ 30 points). Not measured on t4, t6."
             ),
             "{sec}"
+        );
+        // A second windows ablation (16-frame windows) is a row of its own, after the first.
+        let mut more = runs.clone();
+        more.push(state_run("e_slotssm+windows16", vec![row(t3, 10.0, 0.0)]));
+        let md = markdown(&x, &more, &[]);
+        let at = |needle: &str| md.find(needle).unwrap_or_else(|| panic!("{needle}: {md}"));
+        assert!(
+            at("(carried memory vs independent windows) | – | +30 (+10) |")
+                < at(
+                    "| e_slotssm − e_slotssm+windows16 (carried memory vs independent windows of 16 frames) | +30 (+5) | – | **+30.0** (+5.0) |"
+                )
         );
         // A margin under 30 points on one task: the claim does not hold.
         runs[2].tasks[1].completion = 25.0;
