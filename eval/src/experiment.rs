@@ -214,10 +214,7 @@ pub struct RunResult {
 impl RunResult {
     /// Mean subgoal completion over its tasks, percent (0 without tasks).
     pub fn mean_completion(&self) -> f64 {
-        if self.tasks.is_empty() {
-            return 0.0;
-        }
-        self.tasks.iter().map(|t| t.completion).sum::<f64>() / self.tasks.len() as f64
+        report::mean(self.tasks.iter().map(|t| t.completion))
     }
 }
 
@@ -863,9 +860,6 @@ fn memory_claim(mode: &str, by_variant: &[(&str, Vec<&TaskSummary>)], recipe: &s
                 ablations.push(v);
             }
         }
-    }
-    if ablations.is_empty() {
-        ablations.push("e_slotssm+windows".into());
     }
     let mut comparisons: Vec<(String, String, String)> = vec![(
         format!("e_slotssm{r} − slotvla_h1{r} (the claim)"),

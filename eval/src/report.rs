@@ -365,7 +365,8 @@ pub(crate) fn first_seen<'a>(items: impl IntoIterator<Item = &'a str>) -> Vec<&'
     out
 }
 
-fn mean(v: impl Iterator<Item = f64>) -> f64 {
+/// The mean of `v` (0 when it is empty).
+pub(crate) fn mean(v: impl Iterator<Item = f64>) -> f64 {
     let (s, n) = v.fold((0.0, 0usize), |(s, n), x| (s + x, n + 1));
     if n == 0 { 0.0 } else { s / n as f64 }
 }
