@@ -315,6 +315,19 @@ pub struct TrainSection {
     /// Steps of each episode a prefix lane walks (see `prefix_lanes`; needs it).
     #[serde(skip_serializing_if = "crate::dataset::is_zero")]
     pub prefix_steps: usize,
+    /// `episodes` sampling: lanes kept walking episodes, each with its carried memory (0, the
+    /// default: `batch_size`). With more, each step advances a seeded choice of `batch_size`
+    /// of them by one chunk while the rest wait with their memory, so that a step's chunks come
+    /// from `lane_pool` episodes at unrelated phases instead of the same `batch_size` episodes
+    /// for the 20–90 steps each takes to walk (a waiting lane's memory is a few steps' weights
+    /// old when it goes on, as stored states in recurrent replay).
+    #[serde(skip_serializing_if = "crate::dataset::is_zero")]
+    pub lane_pool: usize,
+    /// `episodes` sampling: the chance in [0, 1] that a chunk in the middle of an episode starts
+    /// a cold memory, as the episode's first chunk does (0, the default: the memory is carried
+    /// through whole episodes; 1: every chunk is an independent window). Seeded per chunk.
+    #[serde(skip_serializing_if = "is_zero_f64")]
+    pub memory_reset: f64,
     /// Data-parallel replicas of the model (default 1): each step splits the batch into this
     /// many groups of consecutive lanes, runs each group's forward and backward on its own
     /// thread with its own copy of the weights, and sums their gradients, each replica's loss
@@ -363,6 +376,10 @@ pub struct TrainSection {
 
 pub use crate::stages::Stage;
 
+fn is_zero_f64(x: &f64) -> bool {
+    *x == 0.0
+}
+
 fn is_one(n: &usize) -> bool {
     *n == 1
 }
@@ -388,6 +405,8 @@ impl Default for TrainSection {
             start_jitter: 0,
             prefix_lanes: 0,
             prefix_steps: 0,
+            lane_pool: 0,
+            memory_reset: 0.0,
             replicas: 1,
             ema: None,
             lr: 3e-4,
@@ -528,6 +547,16 @@ impl Config {
                 lanes > 0,
                 "cuts the episodes that lanes walk",
             ),
+            (
+                "train.lane_pool",
+                self.train.lane_pool > 0,
+                "keeps a pool of episode lanes",
+            ),
+            (
+                "train.memory_reset",
+                self.train.memory_reset != 0.0,
+                "resets the carried memory mid-episode",
+            ),
         ] {
             if set && self.train.sampling != Sampling::Episodes {
                 return Err(format!(
@@ -538,6 +567,20 @@ impl Config {
         if lanes > self.train.batch_size {
             return Err(format!(
                 "train.prefix_lanes = {lanes}: more than the batch's {} lanes",
+                self.train.batch_size
+            ));
+        }
+        let r = self.train.memory_reset;
+        if !(r.is_finite() && (0.0..=1.0).contains(&r)) {
+            return Err(format!(
+                "train.memory_reset: must be a chance in [0, 1] (got {r})"
+            ));
+        }
+        let pool = self.train.lane_pool;
+        if pool > 0 && pool < self.train.batch_size {
+            return Err(format!(
+                "train.lane_pool = {pool}: fewer than the batch's {} lanes (0 or at least the \
+                 batch size)",
                 self.train.batch_size
             ));
         }
@@ -1176,6 +1219,60 @@ variant = "e_slotssm"
                     "train.sampling=\"windows\"",
                 ],
                 "train.prefix_lanes: cuts the episodes that lanes walk",
+            ),
+        ] {
+            let e = Config::load_with(&p, &sets(&bad)).unwrap_err().to_string();
+            assert!(
+                e.contains(want) && e.contains(&p.display().to_string()),
+                "{bad:?}: {e}"
+            );
+        }
+        let c = Config::load_with(&p, &sets(&["train.memory_reset=0.5"])).unwrap();
+        assert_eq!(c.train.memory_reset, 0.5);
+        assert!(c.to_toml().contains("memory_reset = 0.5"));
+        assert!(
+            !Config::load_with(&p, &sets(&[]))
+                .unwrap()
+                .to_toml()
+                .contains("memory_reset")
+        );
+        for (bad, want) in [
+            (
+                vec!["train.memory_reset=1.5"],
+                "train.memory_reset: must be a chance in [0, 1] (got 1.5)",
+            ),
+            (
+                vec!["train.memory_reset=nan"],
+                "must be a chance in [0, 1] (got NaN)",
+            ),
+            (
+                vec!["train.memory_reset=0.5", "train.sampling=\"windows\""],
+                "train.memory_reset: resets the carried memory mid-episode, which only",
+            ),
+        ] {
+            let e = Config::load_with(&p, &sets(&bad)).unwrap_err().to_string();
+            assert!(
+                e.contains(want) && e.contains(&p.display().to_string()),
+                "{bad:?}: {e}"
+            );
+        }
+        let c = Config::load_with(&p, &sets(&["train.lane_pool=64"])).unwrap();
+        assert_eq!(c.train.lane_pool, 64);
+        assert!(c.to_toml().contains("lane_pool = 64"));
+        assert!(
+            !Config::load_with(&p, &sets(&[]))
+                .unwrap()
+                .to_toml()
+                .contains("lane_pool")
+        );
+        for (bad, want) in [
+            (
+                vec!["train.lane_pool=4"],
+                "train.lane_pool = 4: fewer than the batch's 8 lanes",
+            ),
+            (
+                vec!["train.lane_pool=64", "train.sampling=\"windows\""],
+                "train.lane_pool: keeps a pool of episode lanes, which only",
             ),
         ] {
             let e = Config::load_with(&p, &sets(&bad)).unwrap_err().to_string();

@@ -379,6 +379,9 @@ pub struct ChunkSpan {
     pub epoch: u64,
     /// The chunk starts the episode.
     pub fresh: bool,
+    /// The lane that walks it (its row in the carried memory; with a lane pool, a row of the
+    /// pool's memory, else the chunk's position in the batch).
+    pub lane: usize,
 }
 
 /// Episode-long training (truncated BPTT, model.md §10): B lanes each walk one episode in
@@ -394,7 +397,7 @@ pub struct ChunkSpan {
 /// success) but sank the LIBERO-Goal multi-task policy (27.5 → 0 %), so it is off by default
 /// (train/README.md). A shortened first episode is still walked from its first frame, so no
 /// lane ever starts cold in the middle of an episode.
-#[derive(Clone, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct EpisodeSampler {
     /// Draws episodes in the order of a [`Sampler`] over the split's episodes.
     pub order: Sampler,
@@ -419,6 +422,30 @@ pub struct EpisodeSampler {
     /// chunks).
     #[serde(default, skip_serializing_if = "is_zero")]
     pub prefix_steps: usize,
+    /// `train.lane_pool`: lanes kept walking their episodes (0, the default: as many as the
+    /// batch has). With more lanes than the batch, each batch advances a seeded choice of
+    /// `batch_size` of them by one chunk and the others wait where they are with their memory,
+    /// so that one step's chunks come from `lane_pool` episodes at unrelated phases instead of
+    /// the same few episodes for many steps in a row.
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub pool: usize,
+    /// `train.memory_reset`: the chance that a chunk in the middle of an episode starts a cold
+    /// memory as if it began the episode (0, the default: never), seeded per chunk by the episode,
+    /// its epoch and the chunk's first step. Between carried memory (0) and independent
+    /// windows (1): the memory a lane trains with spans `len / p` steps on average.
+    #[serde(default, skip_serializing_if = "is_zero_f64")]
+    pub memory_reset: f64,
+    /// Batches drawn from a lane pool so far (seeds the next choice of lanes).
+    #[serde(default, skip_serializing_if = "is_zero_u64")]
+    pub picks: u64,
+}
+
+fn is_zero_u64(n: &u64) -> bool {
+    *n == 0
+}
+
+fn is_zero_f64(x: &f64) -> bool {
+    *x == 0.0
 }
 
 /// Seed of lane `lane`'s first stop, from the sampler's seed.
@@ -436,7 +463,55 @@ impl EpisodeSampler {
             start_jitter: 0,
             prefix_lanes: 0,
             prefix_steps: 0,
+            pool: 0,
+            memory_reset: 0.0,
+            picks: 0,
         }
+    }
+
+    /// The same sampler starting a cold memory at a mid-episode chunk with chance `p`
+    /// ([`EpisodeSampler::memory_reset`]).
+    pub fn with_memory_reset(mut self, p: f64) -> Self {
+        self.memory_reset = p;
+        self
+    }
+
+    /// Whether the chunk of `episode` (drawn in `epoch`) from `start` resets the memory.
+    fn resets(&self, episode: usize, epoch: u64, start: usize) -> bool {
+        if self.memory_reset <= 0.0 {
+            return false;
+        }
+        let seed = self.order.seed
+            ^ 0x7265_7365_745f_6d65
+            ^ (episode as u64).wrapping_mul(0x9e37_79b9_7f4a_7c15)
+            ^ epoch.wrapping_mul(0xc2b2_ae3d_27d4_eb4f)
+            ^ (start as u64).wrapping_mul(0x1656_67b1_9e37_79f9);
+        ChaCha8Rng::seed_from_u64(seed).random_bool(self.memory_reset.min(1.0))
+    }
+
+    /// The same sampler keeping `pool` lanes and advancing a seeded choice of a batch's worth of
+    /// them per batch ([`EpisodeSampler::pool`]; 0 or at most the batch size: every lane, every batch).
+    pub fn with_lane_pool(mut self, pool: usize) -> Self {
+        self.pool = pool;
+        self
+    }
+
+    /// The lanes the next batch of `lanes` chunks advances, ascending: all of them without a
+    /// pool larger than the batch, else `lanes` of the pool's, drawn without replacement by a
+    /// ChaCha8 stream seeded by the sampler's seed and the batch's number.
+    fn pick_lanes(&mut self, lanes: usize) -> Vec<usize> {
+        if self.pool <= lanes {
+            return (0..lanes).collect();
+        }
+        let seed = self.order.seed
+            ^ 0x706f_6f6c_5f6c_616e
+            ^ self.picks.wrapping_mul(0x9e37_79b9_7f4a_7c15);
+        self.picks += 1;
+        let mut picked =
+            rand::seq::index::sample(&mut ChaCha8Rng::seed_from_u64(seed), self.pool, lanes)
+                .into_vec();
+        picked.sort_unstable();
+        picked
     }
 
     /// The same sampler with its first `lanes` lanes walking only the first `steps` steps of
@@ -490,7 +565,8 @@ impl EpisodeSampler {
         len: usize,
         episode_len: impl Fn(usize) -> usize,
     ) -> Vec<ChunkSpan> {
-        while self.lanes.len() < lanes {
+        let picked = self.pick_lanes(lanes);
+        while self.lanes.len() < lanes.max(self.pool) {
             let (episode, epoch, first) = self.draw_episode(&episode_len);
             let stop = self.stagger.then(|| {
                 ChaCha8Rng::seed_from_u64(stop_seed(self.order.seed, self.lanes.len()))
@@ -505,7 +581,8 @@ impl EpisodeSampler {
                 first,
             });
         }
-        (0..self.lanes.len())
+        picked
+            .into_iter()
             .map(|l| {
                 let lane = &self.lanes[l];
                 let end = episode_len(lane.episode).min(lane.stop.unwrap_or(usize::MAX));
@@ -519,12 +596,16 @@ impl EpisodeSampler {
                         first,
                     };
                 }
+                let lane = &self.lanes[l];
+                let fresh =
+                    lane.start == lane.first || self.resets(lane.episode, lane.epoch, lane.start);
                 let lane = &mut self.lanes[l];
                 let span = ChunkSpan {
                     episode: lane.episode,
                     start: lane.start,
                     epoch: lane.epoch,
-                    fresh: lane.start == lane.first,
+                    fresh,
+                    lane: l,
                 };
                 lane.start += len;
                 span
@@ -738,6 +819,109 @@ mod tests {
             assert_eq!(b, zero.next_batch(4, 3, lens));
         }
         assert!(!serde_json::to_string(&zero).unwrap().contains("jitter"));
+    }
+
+    #[test]
+    fn a_lane_pool_advances_a_seeded_choice_of_lanes_and_resumes_exactly() {
+        let lens = |k: usize| 10 + k % 5;
+        let mut s = EpisodeSampler::new(3, 40, false).with_lane_pool(12);
+        // Where each pool lane's next chunk starts, and which lanes each batch took.
+        let mut next: std::collections::HashMap<usize, (usize, usize)> = Default::default();
+        let mut counts = [0usize; 12];
+        let mut batches = std::collections::BTreeSet::new();
+        for _ in 0..300 {
+            let b = s.next_batch(4, 3, lens);
+            let lanes: Vec<usize> = b.iter().map(|c| c.lane).collect();
+            // Four distinct pool lanes, ascending.
+            assert!(
+                lanes.windows(2).all(|w| w[0] < w[1]) && lanes[3] < 12,
+                "{lanes:?}"
+            );
+            batches.insert(lanes);
+            for c in &b {
+                counts[c.lane] += 1;
+                assert!(c.start < lens(c.episode));
+                assert_eq!(c.fresh, c.start == 0, "{c:?}");
+                // A lane goes on from where it stopped, however many batches it waited.
+                if !c.fresh {
+                    assert_eq!(next.get(&c.lane), Some(&(c.episode, c.start)), "{c:?}");
+                }
+                next.insert(c.lane, (c.episode, c.start + 3));
+            }
+        }
+        // Every lane takes part, about 4/12 of the time, in many different groupings.
+        assert_eq!(s.lanes.len(), 12);
+        assert!(
+            counts.iter().all(|&n| (60..=140).contains(&n)),
+            "{counts:?}"
+        );
+        assert!(batches.len() > 100, "{}", batches.len());
+        // Seeded: the same again; resumed from its serialised state, it continues identically.
+        let mut a = EpisodeSampler::new(3, 40, false).with_lane_pool(12);
+        let mut b = a.clone();
+        for _ in 0..20 {
+            assert_eq!(a.next_batch(4, 3, lens), b.next_batch(4, 3, lens));
+        }
+        let mut c: EpisodeSampler =
+            serde_json::from_str(&serde_json::to_string(&a).unwrap()).unwrap();
+        for _ in 0..50 {
+            assert_eq!(a.next_batch(4, 3, lens), c.next_batch(4, 3, lens));
+        }
+        assert_ne!(
+            EpisodeSampler::new(4, 40, false)
+                .with_lane_pool(12)
+                .next_batch(4, 3, lens),
+            EpisodeSampler::new(3, 40, false)
+                .with_lane_pool(12)
+                .next_batch(4, 3, lens)
+        );
+        // A pool no larger than the batch draws what a sampler without one draws.
+        let mut plain = EpisodeSampler::new(3, 40, false);
+        let mut same = EpisodeSampler::new(3, 40, false).with_lane_pool(4);
+        for _ in 0..30 {
+            let b = plain.next_batch(4, 3, lens);
+            assert_eq!(b.iter().map(|c| c.lane).collect::<Vec<_>>(), [0, 1, 2, 3]);
+            assert_eq!(b, same.next_batch(4, 3, lens));
+        }
+        assert!(!serde_json::to_string(&plain).unwrap().contains("pool"));
+    }
+
+    #[test]
+    fn memory_resets_start_cold_chunks_mid_episode_at_the_seeded_rate() {
+        let lens = |k: usize| 30 + k % 11;
+        let mut s = EpisodeSampler::new(9, 60, false).with_memory_reset(0.25);
+        let mut plain = EpisodeSampler::new(9, 60, false);
+        let (mut mid, mut reset) = (0usize, 0usize);
+        for _ in 0..500 {
+            let (b, p) = (s.next_batch(4, 4, lens), plain.next_batch(4, 4, lens));
+            // The same chunks as without resets; only `fresh` differs, and only mid-episode.
+            for (c, q) in b.iter().zip(&p) {
+                assert_eq!(
+                    (c.episode, c.start, c.epoch, c.lane),
+                    (q.episode, q.start, q.epoch, q.lane)
+                );
+                if c.start == 0 {
+                    assert!(c.fresh);
+                } else {
+                    assert!(!q.fresh);
+                    mid += 1;
+                    reset += c.fresh as usize;
+                }
+            }
+        }
+        let rate = reset as f64 / mid as f64;
+        assert!((0.22..0.28).contains(&rate), "{reset} of {mid}");
+        // Seeded per chunk: a resumed sampler continues identically.
+        let mut c: EpisodeSampler =
+            serde_json::from_str(&serde_json::to_string(&s).unwrap()).unwrap();
+        for _ in 0..40 {
+            assert_eq!(s.next_batch(4, 4, lens), c.next_batch(4, 4, lens));
+        }
+        assert!(
+            !serde_json::to_string(&plain)
+                .unwrap()
+                .contains("memory_reset")
+        );
     }
 
     #[test]

@@ -63,6 +63,8 @@ impl Draw {
                 EpisodeSampler::new(train.seed, data.train.num_episodes(), train.stagger)
                     .with_start_jitter(train.start_jitter)
                     .with_prefix_lanes(train.prefix_lanes, train.prefix_steps)
+                    .with_lane_pool(train.lane_pool)
+                    .with_memory_reset(train.memory_reset)
             }),
         }
     }

@@ -474,6 +474,20 @@ pub fn train(cfg: &Config, opts: &TrainOptions) -> Result<TrainSummary> {
                     ),
                 });
             }
+            // The episode sampler's options come from the checkpoint: a changed one is refused,
+            // not ignored.
+            if let Some(e) = &l.state.episodes
+                && (e.pool, e.memory_reset) != (t.lane_pool, t.memory_reset)
+            {
+                return Err(TrainError::IncompatibleCheckpoint {
+                    path: l.dir,
+                    message: format!(
+                        "it was trained with `train.lane_pool = {}` and `train.memory_reset = {}`, \
+                         the config asks {} and {}",
+                        e.pool, e.memory_reset, t.lane_pool, t.memory_reset
+                    ),
+                });
+            }
             let carry = checkpoint::read_carry(&l.dir, &ad)?;
             if l.state.sampler.len != data.train.len() {
                 return Err(TrainError::IncompatibleCheckpoint {
@@ -603,13 +617,26 @@ pub fn train(cfg: &Config, opts: &TrainOptions) -> Result<TrainSummary> {
         let stage = stages::active(&t.stages, state.step).map(|(_, s)| s);
         let replicas = prepared.shards.len();
         let per = t.batch_size / replicas;
+        // With a lane pool the batch's lanes are the pool lanes the sampler picked.
+        let pool = state.episodes.as_ref().map_or(0, |e| e.pool);
+        let picked: Option<Vec<usize>> = match &prepared.key {
+            loader::DrawKey::Episodes(spans) if pool > t.batch_size => {
+                Some(spans.iter().map(|s| s.lane).collect())
+            }
+            _ => None,
+        };
+        let batch_carry = match &picked {
+            Some(lanes) if !carry.is_empty() => carry.pick_lanes(lanes, pool)?,
+            Some(_) => Carry::default(),
+            None => std::mem::take(&mut carry),
+        };
         let inputs: Vec<(loader::Shard, Carry)> = prepared
             .shards
             .into_iter()
             .enumerate()
             .map(|(i, shard)| {
                 let carry_in = match &shard.fresh {
-                    Some(fresh) if !carry.is_empty() => carry
+                    Some(fresh) if !batch_carry.is_empty() => batch_carry
                         .lanes(i * per, per, t.batch_size)
                         .with_fresh(fresh.clone()),
                     _ => Carry::default(),
@@ -683,7 +710,11 @@ pub fn train(cfg: &Config, opts: &TrainOptions) -> Result<TrainSummary> {
             carries.push(o.carry);
         }
         if state.episodes.is_some() {
-            carry = Carry::cat_lanes(carries)?;
+            let out = Carry::cat_lanes(carries)?;
+            carry = match &picked {
+                Some(lanes) => carry.put_lanes(pool, lanes, &out)?,
+                None => out,
+            };
         }
         let mut rec = parallel::mean_record(recs);
         rec.data_s = data_s;

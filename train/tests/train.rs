@@ -128,8 +128,10 @@ fn stopped_and_resumed_run_ends_with_identical_weights() {
         train::config::Sampling::Episodes,
         train::config::Sampling::Windows,
     ] {
-        stop_and_resume(sampling);
+        stop_and_resume(sampling, 0);
     }
+    // A lane pool three times the batch: the checkpoint keeps every pool lane's memory.
+    stop_and_resume(train::config::Sampling::Episodes, 3);
 }
 
 /// The loader thread prepares the batches the loop would have made: a run with it and one
@@ -169,16 +171,37 @@ fn prefetched_batches_train_like_batches_made_in_the_loop() {
 
 /// Episode sampling carries the memory across batches: the checkpoint keeps it (carry.json),
 /// so the resumed run continues with the memory the uninterrupted run had.
-fn stop_and_resume(sampling: train::config::Sampling) {
+/// `pool`: a lane pool of that many batches' lanes (0: none).
+fn stop_and_resume(sampling: train::config::Sampling, pool: usize) {
     let (a, b) = (tempfile::tempdir().unwrap(), tempfile::tempdir().unwrap());
     let mut cfg = short_config(12, 6);
     cfg.train.sampling = sampling;
+    cfg.train.lane_pool = pool * cfg.train.batch_size;
     train::train(&cfg, &opts(a.path())).unwrap();
-    let carried = a
-        .path()
-        .join("checkpoints/step_000000006/carry.json")
-        .is_file();
-    assert_eq!(carried, sampling == train::config::Sampling::Episodes);
+    let carry = a.path().join("checkpoints/step_000000006/carry.json");
+    assert_eq!(
+        carry.is_file(),
+        sampling == train::config::Sampling::Episodes
+    );
+    if pool > 0 {
+        // One slot row per pool lane.
+        let rec: model::variants::CarryRecord =
+            serde_json::from_str(&std::fs::read_to_string(&carry).unwrap()).unwrap();
+        assert_eq!(
+            rec.slots.unwrap().shape[0],
+            pool * cfg.train.batch_size,
+            "pool lanes in carry.json"
+        );
+        // The pool draws other batches than a run without one: other weights.
+        let plain = tempfile::tempdir().unwrap();
+        let mut no_pool = cfg.clone();
+        no_pool.train.lane_pool = 0;
+        train::train(&no_pool, &opts(plain.path())).unwrap();
+        assert_ne!(
+            common::bits(&common::final_weights(a.path())),
+            common::bits(&common::final_weights(plain.path()))
+        );
+    }
     // Stopped at the mid-way checkpoint, as if killed right after it.
     let stop = TrainOptions {
         stop_at: Some(6),
@@ -639,6 +662,20 @@ fn incompatible_checkpoint_exits_2() {
     let p = write_config(dir.path(), &other);
     let stderr = exit_2_stderr(&[p.to_str().unwrap(), "--run-dir", run.to_str().unwrap()]);
     assert!(stderr.contains("incompatible checkpoint"), "{stderr}");
+    // The episode sampler's options are the checkpoint's: changing one is refused.
+    let mut pooled = cfg.clone();
+    pooled.train.steps = 4;
+    pooled.train.lane_pool = 3 * cfg.train.batch_size;
+    let e = train::train(&pooled, &opts(&run)).unwrap_err();
+    assert_eq!(e.exit_code(), 2);
+    assert!(
+        e.to_string().contains(&format!(
+            "it was trained with `train.lane_pool = 0` and `train.memory_reset = 0`, the config \
+             asks {} and 0",
+            3 * cfg.train.batch_size
+        )),
+        "{e}"
+    );
     // --resume with nothing to resume is bad input too.
     let empty = dir.path().join("empty");
     let out = train_bin(&[

@@ -298,6 +298,28 @@ impl Carry {
         })
     }
 
+    /// The lanes `picked` of a carry over `lanes` lanes, in that order (a lane pool's batch).
+    pub fn pick_lanes(&self, picked: &[usize], lanes: usize) -> Result<Carry> {
+        Carry::cat_lanes(picked.iter().map(|&l| self.lanes(l, 1, lanes)).collect())
+    }
+
+    /// A carry over `lanes` lanes whose lanes `picked` are `part`'s lanes, in order, and whose
+    /// others are this carry's (a lane pool after a batch advanced `picked`). Where this carry
+    /// is empty (no lane has run yet), the others copy `part`'s first lane: placeholders, since
+    /// a lane that has not run starts its episode and its memory is never read. Not `fresh`.
+    pub fn put_lanes(&self, lanes: usize, picked: &[usize], part: &Carry) -> Result<Carry> {
+        let n = picked.len();
+        let rows = (0..lanes)
+            .map(|l| match picked.iter().position(|&p| p == l) {
+                Some(i) => part.lanes(i, 1, n),
+                None if self.is_empty() => part.lanes(0, 1, n),
+                None => self.lanes(l, 1, lanes),
+            })
+            .map(|c| Carry { fresh: None, ..c })
+            .collect();
+        Carry::cat_lanes(rows)
+    }
+
     /// Whether nothing is carried (every lane starts fresh).
     pub fn is_empty(&self) -> bool {
         self.slots.is_none() && self.ssm.is_none() && self.history.is_none()
@@ -430,6 +452,48 @@ mod tests {
                 .try_to_vec::<bool>()
                 .unwrap(),
             vec![true, false, false, true]
+        );
+        // A pool of 4 lanes: lanes 3 and 1 taken out, changed, and put back.
+        let picked = carry.pick_lanes(&[3, 1], 4).unwrap();
+        assert_eq!(
+            picked.to_record(),
+            Carry::cat_lanes(vec![carry.lanes(3, 1, 4), carry.lanes(1, 1, 4)])
+                .unwrap()
+                .to_record()
+        );
+        let changed = Carry {
+            slots: picked.slots.clone().map(|t| t + 1000.0),
+            ..picked.clone()
+        };
+        let back = carry.put_lanes(4, &[3, 1], &changed).unwrap();
+        let slots = |c: &Carry| {
+            c.slots
+                .clone()
+                .unwrap()
+                .into_data()
+                .try_to_vec::<f32>()
+                .unwrap()
+        };
+        let (before, after) = (slots(&carry), slots(&back));
+        for (i, (b, a)) in before.iter().zip(&after).enumerate() {
+            let lane = i / 6;
+            let want = if lane == 1 || lane == 3 {
+                b + 1000.0
+            } else {
+                *b
+            };
+            assert_eq!(*a, want, "value {i} of lane {lane}");
+        }
+        assert_eq!(back.ssm.as_ref().unwrap().blocks[0].h.dims(), [12, 2, 5]);
+        assert!(back.fresh.is_none());
+        // Into an empty pool, the lanes not picked copy the batch's first lane.
+        let first = Carry::default()
+            .put_lanes(3, &[2], &carry.lanes(1, 1, 4))
+            .unwrap();
+        let lane1 = slots(&carry)[6..12].to_vec();
+        assert_eq!(
+            slots(&first),
+            [lane1.clone(), lane1.clone(), lane1].concat()
         );
         // Parts that disagree on what they carry are refused.
         let bare = Carry::default();
