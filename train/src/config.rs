@@ -157,7 +157,8 @@ pub struct GenerateSpec {
     pub exec_noise: f64,
 }
 
-fn is_zero(v: &f64) -> bool {
+/// Whether a number is zero (serde: numbers left out of configs and checkpoints at their default).
+pub(crate) fn is_zero(v: &f64) -> bool {
     *v == 0.0
 }
 
@@ -326,7 +327,7 @@ pub struct TrainSection {
     /// `episodes` sampling: the chance in [0, 1] that a chunk in the middle of an episode starts
     /// a cold memory, as the episode's first chunk does (0, the default: the memory is carried
     /// through whole episodes; 1: every chunk is an independent window). Seeded per chunk.
-    #[serde(skip_serializing_if = "is_zero_f64")]
+    #[serde(skip_serializing_if = "is_zero")]
     pub memory_reset: f64,
     /// Data-parallel replicas of the model (default 1): each step splits the batch into this
     /// many groups of consecutive lanes, runs each group's forward and backward on its own
@@ -375,10 +376,6 @@ pub struct TrainSection {
 }
 
 pub use crate::stages::Stage;
-
-fn is_zero_f64(x: &f64) -> bool {
-    *x == 0.0
-}
 
 fn is_one(n: &usize) -> bool {
     *n == 1

@@ -433,7 +433,7 @@ pub struct EpisodeSampler {
     /// memory as if it began the episode (0, the default: never), seeded per chunk by the episode,
     /// its epoch and the chunk's first step. Between carried memory (0) and independent
     /// windows (1): the memory a lane trains with spans `len / p` steps on average.
-    #[serde(default, skip_serializing_if = "is_zero_f64")]
+    #[serde(default, skip_serializing_if = "crate::config::is_zero")]
     pub memory_reset: f64,
     /// Batches drawn from a lane pool so far (seeds the next choice of lanes).
     #[serde(default, skip_serializing_if = "is_zero_u64")]
@@ -442,10 +442,6 @@ pub struct EpisodeSampler {
 
 fn is_zero_u64(n: &u64) -> bool {
     *n == 0
-}
-
-fn is_zero_f64(x: &f64) -> bool {
-    *x == 0.0
 }
 
 /// Seed of lane `lane`'s first stop, from the sampler's seed.
@@ -496,11 +492,17 @@ impl EpisodeSampler {
         self
     }
 
+    /// Whether batches of `lanes` chunks are drawn from a pool of more lanes (then a chunk's
+    /// [`ChunkSpan::lane`] is a row of the pool's memory, not its place in the batch).
+    pub fn pooled(&self, lanes: usize) -> bool {
+        self.pool > lanes
+    }
+
     /// The lanes the next batch of `lanes` chunks advances, ascending: all of them without a
     /// pool larger than the batch, else `lanes` of the pool's, drawn without replacement by a
     /// ChaCha8 stream seeded by the sampler's seed and the batch's number.
     fn pick_lanes(&mut self, lanes: usize) -> Vec<usize> {
-        if self.pool <= lanes {
+        if !self.pooled(lanes) {
             return (0..lanes).collect();
         }
         let seed = self.order.seed

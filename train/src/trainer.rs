@@ -618,9 +618,13 @@ pub fn train(cfg: &Config, opts: &TrainOptions) -> Result<TrainSummary> {
         let replicas = prepared.shards.len();
         let per = t.batch_size / replicas;
         // With a lane pool the batch's lanes are the pool lanes the sampler picked.
-        let pool = state.episodes.as_ref().map_or(0, |e| e.pool);
+        let pool = state
+            .episodes
+            .as_ref()
+            .filter(|e| e.pooled(t.batch_size))
+            .map_or(0, |e| e.pool);
         let picked: Option<Vec<usize>> = match &prepared.key {
-            loader::DrawKey::Episodes(spans) if pool > t.batch_size => {
+            loader::DrawKey::Episodes(spans) if pool > 0 => {
                 Some(spans.iter().map(|s| s.lane).collect())
             }
             _ => None,
