@@ -368,6 +368,10 @@ pub struct TrainSection {
     pub val_every: u64,
     /// Batches per validation (0 = the whole val split).
     pub val_batches: usize,
+    /// Validation episodes walked whole with the memory carried from their first frame, as the
+    /// closed loop reads it (`RUN/val_walk.jsonl`, beside `val.jsonl`'s cold-memory windows),
+    /// evenly spread over the val split (0 = none; more than the split has: all).
+    pub val_walk: usize,
     /// Loss weights.
     pub loss_weights: LossWeights,
     /// Staged training (empty = one stage: every loss, nothing frozen); see [`Stage`].
@@ -418,6 +422,7 @@ impl Default for TrainSection {
             seed: 0,
             val_every: 1000,
             val_batches: 8,
+            val_walk: 16,
             loss_weights: LossWeights::default(),
             stages: Vec::new(),
         }

@@ -272,10 +272,21 @@ impl RunData {
         idle_tail: bool,
         device: &Device,
     ) -> Result<(model::WindowBatch, Tensor<1, Bool>)> {
+        self.chunk_batch_of(&self.train, spans, idle_tail, device)
+    }
+
+    /// [`Self::chunk_batch_with`] over the episodes of `ds` (the training or validation split).
+    pub fn chunk_batch_of(
+        &self,
+        ds: &WindowDataset,
+        spans: &[ChunkSpan],
+        idle_tail: bool,
+        device: &Device,
+    ) -> Result<(model::WindowBatch, Tensor<1, Bool>)> {
         use rayon::prelude::*;
         let mut samples = spans
             .par_iter()
-            .map(|s| self.train.chunk(s.episode, s.start, s.epoch))
+            .map(|s| ds.chunk(s.episode, s.start, s.epoch))
             .collect::<data::Result<Vec<_>>>()?;
         if !idle_tail {
             samples.iter_mut().for_each(drop_idle_tail);

@@ -1,6 +1,7 @@
 //! `train CONFIG [--set KEY=VALUE]… [--resume] [--keep K] [--steps N] [--run-dir DIR] [--backend B]
-//! [--threads N] [--bench N [--json]]`: trains an experiment config (or measures the trainer's speed on
-//! it); exit status 2 on bad input (config, dataset, backend, checkpoint).
+//! [--threads N] [--bench N [--json]] [--validate]`: trains an experiment config (or measures the
+//! trainer's speed on it, or validates its newest checkpoint); exit status 2 on bad input (config,
+//! dataset, backend, checkpoint).
 
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -58,10 +59,16 @@ struct Args {
     /// With --bench: print the figures as one JSON line instead of a table.
     #[arg(long, requires = "bench")]
     json: bool,
+    /// Validate the run directory's newest checkpoint (its EMA weights where kept) instead of
+    /// training: the cold-memory windows of `val.jsonl` and the validation episodes walked with
+    /// carried memory of `val_walk.jsonl` (`[train].val_walk` of them), printed, nothing written.
+    #[arg(long, conflicts_with_all = ["bench", "resume", "steps"])]
+    validate: bool,
 }
 
 enum Outcome {
     Trained(train::TrainSummary),
+    Validated(PathBuf, Box<train::trainer::Validation>),
     Measured(train::bench::BenchReport, bool),
 }
 
@@ -103,6 +110,10 @@ fn run(args: Args) -> Result<Outcome, train::TrainError> {
         stop_at: None,
         no_prefetch: args.no_prefetch,
     };
+    if args.validate {
+        return train::trainer::validate_run(&cfg, &opts)
+            .map(|(c, v)| Outcome::Validated(c, Box::new(v)));
+    }
     train::train(&cfg, &opts).map(Outcome::Trained)
 }
 
@@ -127,15 +138,33 @@ fn main() -> ExitCode {
         Ok(Outcome::Trained(s)) => {
             let fmt = |x: Option<f64>| x.map_or("-".into(), |v| format!("{v:.4}"));
             data::outln!(
-                "{}: steps {}..{}, loss {} → {}, val {}, {:.2} steps/s",
+                "{}: steps {}..{}, loss {} → {}, val {} (walked {}), {:.2} steps/s",
                 s.run_dir.display(),
                 s.start_step,
                 s.step,
                 fmt(s.first_loss),
                 fmt(s.final_loss),
                 fmt(s.val_loss),
+                fmt(s.val_walk_loss),
                 s.steps_per_s
             );
+            ExitCode::SUCCESS
+        }
+        Ok(Outcome::Validated(checkpoint, v)) => {
+            data::outln!(
+                "{} (step {}): {}",
+                checkpoint.display(),
+                v.step,
+                v.line().unwrap_or_else(|| "no validation split".into())
+            );
+            for (name, r) in [("windows", &v.windows), ("walked", &v.walked)] {
+                if let Some(r) = r {
+                    data::outln!(
+                        "{name} {}",
+                        serde_json::to_string(r).expect("plain numbers")
+                    );
+                }
+            }
             ExitCode::SUCCESS
         }
         Err(e) => data::exit::report::<train::TrainError>(&anyhow::Error::new(e)),

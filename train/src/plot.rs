@@ -54,16 +54,24 @@ fn fmt(v: f64) -> String {
     }
 }
 
-/// Draws `train` (step, value) as a curve and `val` as dots into a PNG at `path`.
+/// Draws `train` (step, value) as a curve, `val` (cold-memory windows) as red dots and
+/// `walked` (validation episodes walked with carried memory) as green dots into a PNG at `path`.
 pub fn loss_curve(
     path: &Path,
     title: &str,
     train: &[(u64, f64)],
     val: &[(u64, f64)],
+    walked: &[(u64, f64)],
 ) -> Result<()> {
     let mut img = RgbImage::from_pixel(W, H, Rgb([255, 255, 255]));
     let finite = |v: &&(u64, f64)| v.1.is_finite();
-    let all: Vec<(u64, f64)> = train.iter().chain(val).filter(finite).copied().collect();
+    let all: Vec<(u64, f64)> = train
+        .iter()
+        .chain(val)
+        .chain(walked)
+        .filter(finite)
+        .copied()
+        .collect();
     let (x_max, y_min, y_max) = if all.is_empty() {
         (1, 0.0, 1.0)
     } else {
@@ -130,18 +138,24 @@ pub fn loss_curve(
         );
     }
     let red = Rgb([220, 30, 30]);
-    for &(s, v) in val.iter().filter(finite) {
-        for d in -2..=2 {
-            line(
-                &mut img,
-                (px(s) - 2, py(v) + d),
-                (px(s) + 2, py(v) + d),
-                red,
-            );
+    let green = Rgb([20, 150, 40]);
+    for (points, colour) in [(val, red), (walked, green)] {
+        for &(s, v) in points.iter().filter(finite) {
+            for d in -2..=2 {
+                line(
+                    &mut img,
+                    (px(s) - 2, py(v) + d),
+                    (px(s) + 2, py(v) + d),
+                    colour,
+                );
+            }
         }
     }
-    text(&mut img, LEFT + pw - 200, 12, "train", blue);
-    text(&mut img, LEFT + pw - 140, 12, "val", red);
+    text(&mut img, LEFT + pw - 260, 12, "train", blue);
+    text(&mut img, LEFT + pw - 200, 12, "val", red);
+    if !walked.is_empty() {
+        text(&mut img, LEFT + pw - 160, 12, "walked", green);
+    }
     data::fsio::write_png(path, &img).map_err(TrainError::from)
 }
 
@@ -154,11 +168,15 @@ mod tests {
         let dir = tempfile::tempdir().unwrap();
         let p = dir.path().join("loss.png");
         let train: Vec<(u64, f64)> = (1..100).map(|s| (s, 1.0 / s as f64)).collect();
-        loss_curve(&p, "loss", &train, &[(50, 0.1), (99, f64::NAN)]).unwrap();
+        loss_curve(&p, "loss", &train, &[(50, 0.1), (99, f64::NAN)], &[]).unwrap();
         let img = image::open(&p).unwrap().to_rgb8();
         assert_eq!(img.dimensions(), (W, H));
         assert!(img.pixels().any(|p| *p == Rgb([20, 60, 200])));
         assert!(img.pixels().any(|p| *p == Rgb([220, 30, 30])));
-        loss_curve(&p, "empty", &[], &[]).unwrap();
+        assert!(!img.pixels().any(|p| *p == Rgb([20, 150, 40])));
+        loss_curve(&p, "loss", &train, &[(50, 0.1)], &[(50, 0.3)]).unwrap();
+        let img = image::open(&p).unwrap().to_rgb8();
+        assert!(img.pixels().any(|p| *p == Rgb([20, 150, 40])));
+        loss_curve(&p, "empty", &[], &[], &[]).unwrap();
     }
 }

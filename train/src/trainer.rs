@@ -25,7 +25,7 @@ use serde::{Deserialize, Serialize};
 use crate::checkpoint::{self, STATE_FORMAT, TrainState};
 use crate::clip::clip_global_norm;
 use crate::config::{BackendKind, Config, ObsMode, Sampling};
-use crate::dataset::{RunData, ensure_dataset};
+use crate::dataset::{ChunkSpan, RunData, ensure_dataset};
 use crate::ema;
 use crate::error::{Result, TrainError};
 use crate::loader::{self, Draw, Prefetcher};
@@ -75,8 +75,10 @@ pub struct TrainSummary {
     pub first_loss: Option<f64>,
     /// Mean total loss over the last steps of this invocation.
     pub final_loss: Option<f64>,
-    /// Last validation loss.
+    /// Last validation loss (cold-memory windows).
     pub val_loss: Option<f64>,
+    /// Last loss over the validation episodes walked whole with carried memory.
+    pub val_walk_loss: Option<f64>,
     /// Optimiser steps per second in this invocation.
     pub steps_per_s: f64,
     /// The last checkpoint written or resumed.
@@ -150,6 +152,61 @@ fn config_error(cfg: &Config, message: String) -> TrainError {
     }
 }
 
+/// Weighted mean of loss records (validation): each record counts with its weight.
+#[derive(Default)]
+struct MeanRecord {
+    sum: Option<Record>,
+    weight: f64,
+}
+
+impl MeanRecord {
+    /// Adds `r` with weight `w`; a term missing from any record is missing from the mean.
+    fn add(&mut self, r: Record, w: f64) {
+        let add = |a: Option<f64>, b: Option<f64>| a.zip(b).map(|(a, b)| a + w * b);
+        let zero = Record {
+            loss: 0.0,
+            action: 0.0,
+            contrastive: r.contrastive.map(|_| 0.0),
+            window: r.window.map(|_| 0.0),
+            slot_recon: r.slot_recon.map(|_| 0.0),
+            pointer: r.pointer.map(|_| 0.0),
+            progress: r.progress.map(|_| 0.0),
+            done: r.done.map(|_| 0.0),
+            ..r.clone()
+        };
+        let s = self.sum.take().unwrap_or(zero);
+        self.sum = Some(Record {
+            loss: s.loss + w * r.loss,
+            action: s.action + w * r.action,
+            contrastive: add(s.contrastive, r.contrastive),
+            window: add(s.window, r.window),
+            slot_recon: add(s.slot_recon, r.slot_recon),
+            pointer: add(s.pointer, r.pointer),
+            progress: add(s.progress, r.progress),
+            done: add(s.done, r.done),
+            ..s
+        });
+        self.weight += w;
+    }
+
+    /// The mean (None when nothing was added or every weight was zero).
+    fn mean(self) -> Option<Record> {
+        let n = self.weight;
+        let div = |x: Option<f64>| x.map(|x| x / n);
+        self.sum.filter(|_| n > 0.0).map(|s| Record {
+            loss: s.loss / n,
+            action: s.action / n,
+            contrastive: div(s.contrastive),
+            window: div(s.window),
+            slot_recon: div(s.slot_recon),
+            pointer: div(s.pointer),
+            progress: div(s.progress),
+            done: div(s.done),
+            ..s
+        })
+    }
+}
+
 /// Mean losses over the validation split (evenly spread windows, fixed order, no augmentation).
 pub fn validate(
     model: &PolicyModel,
@@ -169,54 +226,167 @@ pub fn validate(
     };
     let indices: Vec<(usize, u64)> = (0..n).map(|k| (k * val.len() / n, 0)).collect();
     let model = model.valid();
-    let mut sum: Option<Record> = None;
-    let mut batches = 0.0;
+    let mut mean = MeanRecord::default();
     for chunk in indices.chunks(batch_size) {
         let batch = data.batch(val, chunk, device)?;
         let (_, losses) = model.forward(&batch)?;
-        let r = record(step, &losses)?;
-        let w = chunk.len() as f64;
-        let add = |a: Option<f64>, b: Option<f64>| match (a, b) {
-            (Some(a), Some(b)) => Some(a + w * b),
-            _ => None,
-        };
-        sum = Some(match sum {
-            None => Record {
-                loss: w * r.loss,
-                action: w * r.action,
-                contrastive: r.contrastive.map(|x| w * x),
-                window: r.window.map(|x| w * x),
-                slot_recon: r.slot_recon.map(|x| w * x),
-                pointer: r.pointer.map(|x| w * x),
-                progress: r.progress.map(|x| w * x),
-                done: r.done.map(|x| w * x),
-                ..r
-            },
-            Some(s) => Record {
-                loss: s.loss + w * r.loss,
-                action: s.action + w * r.action,
-                contrastive: add(s.contrastive, r.contrastive),
-                window: add(s.window, r.window),
-                slot_recon: add(s.slot_recon, r.slot_recon),
-                pointer: add(s.pointer, r.pointer),
-                progress: add(s.progress, r.progress),
-                done: add(s.done, r.done),
-                ..s
-            },
-        });
-        batches += w;
+        mean.add(record(step, &losses)?, chunk.len() as f64);
     }
-    Ok(sum.map(|s| Record {
-        loss: s.loss / batches,
-        action: s.action / batches,
-        contrastive: s.contrastive.map(|x| x / batches),
-        window: s.window.map(|x| x / batches),
-        slot_recon: s.slot_recon.map(|x| x / batches),
-        pointer: s.pointer.map(|x| x / batches),
-        progress: s.progress.map(|x| x / batches),
-        done: s.done.map(|x| x / batches),
-        ..s
-    }))
+    Ok(mean.mean())
+}
+
+/// Mean losses over whole validation episodes walked the way episode sampling trains: `lanes`
+/// episodes at a time, each from its first frame in consecutive chunks of the split's window
+/// length with the memory (slots, SSM state, history) carried from chunk to chunk, a lane taking
+/// the next episode when its own ends. `episodes`: how many of the split's episodes, evenly
+/// spread over it in split order (more than the split has: all; 0: none, and None is returned).
+/// Each chunk counts with its action mass (its frames in the action loss), so the action term is
+/// the per-frame mean over the walked episodes. Unlike [`validate`], which starts every window
+/// from a cold memory, this reads the memory as the closed loop does: from the episode's start.
+pub fn validate_walked(
+    model: &PolicyModel,
+    data: &RunData,
+    lanes: usize,
+    episodes: usize,
+    step: u64,
+    device: &Device,
+) -> Result<Option<Record>> {
+    let Some(val) = &data.val else {
+        return Ok(None);
+    };
+    let total = val.num_episodes();
+    let n = episodes.min(total);
+    let window = val.config().len();
+    if n == 0 || lanes == 0 {
+        return Ok(None);
+    }
+    let mut queue = (0..n).map(|k| k * total / n);
+    let model = model.valid();
+    let mut mean = MeanRecord::default();
+    // Per lane: the episode it walks and the first step of its next chunk.
+    let mut walking: Vec<Option<(usize, usize)>> = vec![None; lanes];
+    let mut carry = Carry::default();
+    loop {
+        let mut fresh = vec![false; lanes];
+        for (lane, slot) in walking.iter_mut().enumerate() {
+            let done = slot.is_none_or(|(e, start)| start >= val.episode_len(e));
+            if done {
+                *slot = queue.next().map(|e| (e, 0));
+                fresh[lane] = slot.is_some();
+            }
+        }
+        let active: Vec<usize> = (0..lanes).filter(|&l| walking[l].is_some()).collect();
+        if active.is_empty() {
+            break;
+        }
+        let spans: Vec<ChunkSpan> = active
+            .iter()
+            .map(|&l| {
+                let (episode, start) = walking[l].expect("active lane");
+                ChunkSpan {
+                    episode,
+                    start,
+                    epoch: 0,
+                    fresh: fresh[l],
+                    lane: l,
+                }
+            })
+            .collect();
+        let (batch, fresh_t) = data.chunk_batch_of(val, &spans, true, device)?;
+        let carry_in = if carry.is_empty() {
+            Carry::default()
+        } else if active.len() == lanes {
+            carry.clone().with_fresh(fresh_t)
+        } else {
+            carry.pick_lanes(&active, lanes)?.with_fresh(fresh_t)
+        };
+        let (_, losses, out) = model.forward_from(&batch, carry_in)?;
+        mean.add(record(step, &losses)?, model.action_mass(&batch)?);
+        carry = if active.len() == lanes {
+            out
+        } else {
+            carry.put_lanes(lanes, &active, &out)?
+        };
+        for &l in &active {
+            if let Some((_, start)) = walking[l].as_mut() {
+                *start += window;
+            }
+        }
+    }
+    Ok(mean.mean())
+}
+
+/// Where a run's walked validation goes (one [`Record`] per validation, as `val.jsonl`).
+pub const VAL_WALK_FILE: &str = "val_walk.jsonl";
+
+/// Both validations of one model: cold-memory windows ([`validate`]) and whole episodes walked
+/// with the memory carried ([`validate_walked`]); None where the run has no val split or the
+/// config turns one off.
+#[derive(Clone, Debug, Default)]
+pub struct Validation {
+    /// Step of the weights validated.
+    pub step: u64,
+    /// Mean losses over cold-memory windows (`val.jsonl`).
+    pub windows: Option<Record>,
+    /// Mean losses over walked episodes (`val_walk.jsonl`).
+    pub walked: Option<Record>,
+}
+
+impl Validation {
+    /// "val loss 0.0936 (walked 0.1021)", or None when neither was measured.
+    pub fn line(&self) -> Option<String> {
+        let walked = self
+            .walked
+            .as_ref()
+            .map(|w| format!("walked {:.4}", w.loss));
+        match (&self.windows, walked) {
+            (Some(v), Some(w)) => Some(format!("val loss {:.4} ({w})", v.loss)),
+            (Some(v), None) => Some(format!("val loss {:.4}", v.loss)),
+            (None, Some(w)) => Some(format!("val loss: {w}")),
+            (None, None) => None,
+        }
+    }
+}
+
+/// Both validations of `model` at `step` as `cfg` asks for them.
+fn validations(
+    model: &PolicyModel,
+    data: &RunData,
+    cfg: &Config,
+    step: u64,
+    device: &Device,
+) -> Result<Validation> {
+    let t = &cfg.train;
+    let windows = validate(model, data, t.batch_size, t.val_batches, step, device)?;
+    let walked = validate_walked(model, data, t.batch_size, t.val_walk, step, device)?;
+    Ok(Validation {
+        step,
+        windows,
+        walked,
+    })
+}
+
+/// Validates the newest checkpoint of `cfg`'s run directory (its EMA weights where it keeps
+/// them) without training or writing anything: `train --validate`. Both validations use the
+/// config's settings (`val_batches`, `val_walk`, batch size, window length), so runs
+/// trained before `val_walk` existed can be compared on it.
+pub fn validate_run(cfg: &Config, opts: &TrainOptions) -> Result<(PathBuf, Validation)> {
+    let cfg = resolve(cfg, opts);
+    let run = run_dir(&cfg, opts);
+    let device = model::backend::device(cfg.backend.kind)?;
+    let ad = device.clone().autodiff();
+    let (mcfg, data) = open_data(&cfg)?;
+    let Some(l) = newest_checkpoint(checkpoint::candidates(&run)?, &cfg, &mcfg, &ad)? else {
+        return Err(TrainError::Usage(format!(
+            "--validate: no checkpoint in {}",
+            run.join(checkpoint::CHECKPOINTS).display()
+        )));
+    };
+    let model = l.ema.as_ref().unwrap_or(&l.model);
+    Ok((
+        l.dir.clone(),
+        validations(model, &data, &cfg, l.state.step, &device)?,
+    ))
 }
 
 fn new_optimizer(cfg: &Config) -> ModuleOptimizer {
@@ -232,6 +402,12 @@ fn new_optimizer(cfg: &Config) -> ModuleOptimizer {
 pub fn plot_run(run_dir: &Path) -> Result<Vec<PathBuf>> {
     let train = metrics::read(&run_dir.join("metrics.jsonl"))?;
     let val = metrics::read(&run_dir.join("val.jsonl"))?;
+    let walk_path = run_dir.join(VAL_WALK_FILE);
+    let walked = if walk_path.exists() {
+        metrics::read(&walk_path)?
+    } else {
+        vec![]
+    };
     let dir = run_dir.join("plots");
     std::fs::create_dir_all(&dir).map_err(|e| TrainError::io(&dir, e))?;
     let mut out = vec![];
@@ -250,7 +426,7 @@ pub fn plot_run(run_dir: &Path) -> Result<Vec<PathBuf>> {
                 .collect()
         };
         let p = dir.join(format!("loss_{name}.png"));
-        plot::loss_curve(&p, name, &pick(&train), &pick(&val))?;
+        plot::loss_curve(&p, name, &pick(&train), &pick(&val), &pick(&walked))?;
         out.push(p);
     }
     Ok(out)
@@ -367,34 +543,19 @@ fn replica_pools(replicas: usize) -> Result<Vec<rayon::ThreadPool>> {
         .collect()
 }
 
-/// Trains `cfg` (see the module docs); resumes automatically from the run directory's newest
-/// complete checkpoint.
-pub fn train(cfg: &Config, opts: &TrainOptions) -> Result<TrainSummary> {
-    let cfg = resolve(cfg, opts);
-    let run = run_dir(&cfg, opts);
-    let t = cfg.train.clone();
-    let device = model::backend::device(cfg.backend.kind)?;
-    let ad = device.clone().autodiff();
-
-    ensure_dataset(&cfg, opts.progress)?;
-    let (mcfg, data) = open_data(&cfg)?;
-    let data = Arc::new(data);
-
-    std::fs::create_dir_all(&run).map_err(|e| TrainError::io(&run, e))?;
-    checkpoint::clean_temporaries(&run)?;
-    let config_toml = cfg.to_toml();
-
-    // Fresh model and optimiser, or the newest loadable checkpoint.
-    let mut candidates = checkpoint::candidates(&run)?;
-    if opts.resume && candidates.is_empty() {
-        return Err(TrainError::Usage(format!(
-            "--resume: no checkpoint in {}",
-            run.join(checkpoint::CHECKPOINTS).display()
-        )));
-    }
+/// The newest checkpoint of `candidates` (newest first) that verifies and loads; None when
+/// there is none. A checkpoint of another model is an error (never a silent fall back to an
+/// older one); corrupt or unreadable ones are skipped with a warning, and the newest one's error
+/// is returned when none is usable (the evaluator's rule, `model::run::newest_valid`).
+fn newest_checkpoint(
+    candidates: Vec<PathBuf>,
+    cfg: &Config,
+    mcfg: &ModelConfig,
+    ad: &Device,
+) -> Result<Option<checkpoint::Loaded>> {
     let mut loaded = None;
     let mut last_err = None;
-    for dir in candidates.drain(..) {
+    for dir in candidates {
         // The evaluator's rule (model::run::newest_valid): verify against the manifest first.
         match model::run::verify_checkpoint(&dir) {
             Ok((_, model::run::Verified::Manifest)) => {}
@@ -412,7 +573,7 @@ pub fn train(cfg: &Config, opts: &TrainOptions) -> Result<TrainSummary> {
                 continue;
             }
         }
-        match checkpoint::load(&dir, &mcfg, new_optimizer(&cfg), &ad) {
+        match checkpoint::load(&dir, mcfg, new_optimizer(cfg), ad) {
             Ok(l) => {
                 loaded = Some(l);
                 break;
@@ -432,11 +593,38 @@ pub fn train(cfg: &Config, opts: &TrainOptions) -> Result<TrainSummary> {
             }
         }
     }
-    if loaded.is_none()
-        && let Some(e) = last_err
-    {
-        return Err(e);
+    match (loaded, last_err) {
+        (None, Some(e)) => Err(e),
+        (loaded, _) => Ok(loaded),
     }
+}
+
+/// Trains `cfg` (see the module docs); resumes automatically from the run directory's newest
+/// complete checkpoint.
+pub fn train(cfg: &Config, opts: &TrainOptions) -> Result<TrainSummary> {
+    let cfg = resolve(cfg, opts);
+    let run = run_dir(&cfg, opts);
+    let t = cfg.train.clone();
+    let device = model::backend::device(cfg.backend.kind)?;
+    let ad = device.clone().autodiff();
+
+    ensure_dataset(&cfg, opts.progress)?;
+    let (mcfg, data) = open_data(&cfg)?;
+    let data = Arc::new(data);
+
+    std::fs::create_dir_all(&run).map_err(|e| TrainError::io(&run, e))?;
+    checkpoint::clean_temporaries(&run)?;
+    let config_toml = cfg.to_toml();
+
+    // Fresh model and optimiser, or the newest loadable checkpoint.
+    let candidates = checkpoint::candidates(&run)?;
+    if opts.resume && candidates.is_empty() {
+        return Err(TrainError::Usage(format!(
+            "--resume: no checkpoint in {}",
+            run.join(checkpoint::CHECKPOINTS).display()
+        )));
+    }
+    let loaded = newest_checkpoint(candidates, &cfg, &mcfg, &ad)?;
     let episodes = data.train.num_episodes();
     let (mut model, mut ema, mut optim, mut state, mut carry, resumed_from) = match loaded {
         Some(l) => {
@@ -535,6 +723,7 @@ pub fn train(cfg: &Config, opts: &TrainOptions) -> Result<TrainSummary> {
     write_file(&run.join("config.toml"), &config_toml)?;
     let mut train_log = JsonlWriter::open(&run.join("metrics.jsonl"), state.step)?;
     let mut val_log = JsonlWriter::open(&run.join("val.jsonl"), state.step)?;
+    let mut walk_log = JsonlWriter::open(&run.join(VAL_WALK_FILE), state.step)?;
 
     let sched = WarmupCosine {
         lr: t.lr,
@@ -563,6 +752,7 @@ pub fn train(cfg: &Config, opts: &TrainOptions) -> Result<TrainSummary> {
     let mut last_ckpt = resumed_from.clone();
     let mut recent: Vec<f64> = vec![];
     let mut val_loss = None;
+    let mut val_walk_loss = None;
     let mut last_val_step = None;
     let val_due = |step: u64| t.val_every > 0 && step.is_multiple_of(t.val_every);
     // The loader thread draws from a copy of the sampler; the loop advances the saved one.
@@ -757,17 +947,23 @@ pub fn train(cfg: &Config, opts: &TrainOptions) -> Result<TrainSummary> {
         });
 
         if val_due(state.step) {
-            if let Some(v) = validate(
+            let v = validations(
                 ema.as_ref().unwrap_or(&model),
                 &data,
-                t.batch_size,
-                t.val_batches,
+                &cfg,
                 state.step,
                 &device,
-            )? {
+            )?;
+            if let Some(v) = &v.windows {
                 val_loss = Some(v.loss);
-                val_log.write(&v)?;
-                bar.println(format!("step {}: val loss {:.4}", state.step, v.loss));
+                val_log.write(v)?;
+            }
+            if let Some(w) = &v.walked {
+                val_walk_loss = Some(w.loss);
+                walk_log.write(w)?;
+            }
+            if let Some(line) = v.line() {
+                bar.println(format!("step {}: {line}", state.step));
             }
             last_val_step = Some(state.step);
         }
@@ -790,19 +986,22 @@ pub fn train(cfg: &Config, opts: &TrainOptions) -> Result<TrainSummary> {
         }
     }
     let final_val = state.step == t.steps && last_val_step != Some(state.step);
-    if final_val
-        && state.step > start_step
-        && let Some(v) = validate(
+    if final_val && state.step > start_step {
+        let v = validations(
             ema.as_ref().unwrap_or(&model),
             &data,
-            t.batch_size,
-            t.val_batches,
+            &cfg,
             state.step,
             &device,
-        )?
-    {
-        val_loss = Some(v.loss);
-        val_log.write(&v)?;
+        )?;
+        if let Some(v) = &v.windows {
+            val_loss = Some(v.loss);
+            val_log.write(v)?;
+        }
+        if let Some(w) = &v.walked {
+            val_walk_loss = Some(w.loss);
+            walk_log.write(w)?;
+        }
     }
     bar.finish_and_clear();
     plot_run(&run)?;
@@ -818,6 +1017,7 @@ pub fn train(cfg: &Config, opts: &TrainOptions) -> Result<TrainSummary> {
         first_loss,
         final_loss: (!recent.is_empty()).then(|| recent.iter().sum::<f64>() / recent.len() as f64),
         val_loss,
+        val_walk_loss,
         steps_per_s: if secs > 0.0 { done as f64 / secs } else { 0.0 },
         checkpoint: last_ckpt,
     })

@@ -88,6 +88,7 @@ fn tiny_config_halves_the_training_loss() {
         "model.json",
         "action_stats.json",
         "val.jsonl",
+        "val_walk.jsonl",
         "plots/loss_loss.png",
         "plots/loss_action.png",
         "plots/loss_window.png",
@@ -96,6 +97,43 @@ fn tiny_config_halves_the_training_loss() {
         assert!(run.path().join(f).is_file(), "{f} missing");
     }
     assert!(s.val_loss.is_some_and(f64::is_finite));
+    assert!(s.val_walk_loss.is_some_and(f64::is_finite));
+    // One walked validation beside each cold one, at the same steps.
+    let steps = |f: &str| -> Vec<u64> {
+        metrics::read(&run.path().join(f))
+            .unwrap()
+            .iter()
+            .map(|r| r.step)
+            .collect()
+    };
+    assert_eq!(steps("val_walk.jsonl"), steps("val.jsonl"));
+    assert_eq!(steps("val.jsonl"), vec![100, 200, 300, 400]);
+    // `train --validate` reads the newest checkpoint's weights back: the same losses as the
+    // run's last validations, bit for bit, and the logs stay as they were.
+    let config = write_config(run.path(), &cfg);
+    let out = train_bin(&[
+        config.to_str().unwrap(),
+        "--run-dir",
+        run.path().to_str().unwrap(),
+        "--validate",
+    ]);
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(out.status.success(), "{stdout}");
+    assert!(stdout.contains("(step 400): val loss"), "{stdout}");
+    for (name, file) in [("windows", "val.jsonl"), ("walked", "val_walk.jsonl")] {
+        let line = stdout
+            .lines()
+            .find_map(|l| l.strip_prefix(&format!("{name} ")))
+            .unwrap_or_else(|| panic!("no {name} line in {stdout}"));
+        let printed: metrics::Record = serde_json::from_str(line).unwrap();
+        let logged = metrics::read(&run.path().join(file)).unwrap();
+        assert_eq!(
+            printed.loss.to_bits(),
+            logged.last().unwrap().loss.to_bits(),
+            "{name}"
+        );
+    }
+    assert_eq!(steps("val.jsonl").len(), 4);
     // keep = 2: older checkpoints were pruned.
     let kept = train::checkpoint::list(run.path()).unwrap();
     assert_eq!(
@@ -108,6 +146,64 @@ fn tiny_config_halves_the_training_loss() {
     // The saved config is the resolved one and loads back.
     let saved = train::Config::load(run.path().join("config.toml")).unwrap();
     assert_eq!(saved.train, cfg.train);
+}
+
+/// The walked validation (whole validation episodes with the memory carried): its bookkeeping —
+/// lanes taking the next episode, the memory of the lanes that go on, the batch shrinking when
+/// the episodes run out — does not change its per-frame mean, whatever the number of lanes; and
+/// walking each episode in chunks with the memory carried gives the action loss of reading each
+/// episode in one chunk (nothing to carry), while cold-memory windows give another.
+#[test]
+fn walked_validation_is_the_same_for_any_lane_count_and_chunk_length() {
+    let _g = serial();
+    let data_dir = tempfile::tempdir().unwrap();
+    common::write_dataset(data_dir.path(), 12, 40, 32);
+    let run = tempfile::tempdir().unwrap();
+    let mut cfg = common::tiny_config(data_dir.path());
+    cfg.train.steps = 30;
+    cfg.train.warmup_steps = 3;
+    cfg.train.checkpoint_every = 30;
+    cfg.train.val_every = 0;
+    train::train(&cfg, &opts(run.path())).unwrap();
+    let model = checkpoint_model(run.path(), 30);
+    let device = Device::flex();
+    let walked = |window: usize, lanes: usize, episodes: usize| {
+        let mut c = cfg.clone();
+        c.data.window = Some(window);
+        let (_, data) = train::open_data(&c).unwrap();
+        assert_eq!(data.val.as_ref().unwrap().num_episodes(), 3);
+        train::trainer::validate_walked(&model, &data, lanes, episodes, 30, &device)
+            .unwrap()
+            .unwrap()
+    };
+    let base = walked(4, 8, 3);
+    let close = |a: f64, b: f64| (a - b).abs() <= 1e-5 * a.abs().max(1e-3);
+    for lanes in [1, 2, 3] {
+        let r = walked(4, lanes, 3);
+        assert!(
+            close(r.action, base.action),
+            "{lanes} lanes: {r:?} vs {base:?}"
+        );
+        assert!(close(r.loss, base.loss), "{lanes} lanes: {r:?} vs {base:?}");
+    }
+    let whole = walked(40, 2, 3);
+    assert!(close(whole.action, base.action), "{whole:?} vs {base:?}");
+    // Fewer episodes: another mean; none: nothing.
+    assert_ne!(walked(4, 8, 1).action.to_bits(), base.action.to_bits());
+    let (_, data) = train::open_data(&cfg).unwrap();
+    assert!(
+        train::trainer::validate_walked(&model, &data, 8, 0, 30, &device)
+            .unwrap()
+            .is_none()
+    );
+    let cold = train::trainer::validate(&model, &data, 8, 0, 30, &device)
+        .unwrap()
+        .unwrap();
+    eprintln!(
+        "walked {} (whole {}), cold windows {}",
+        base.action, whole.action, cold.action
+    );
+    assert!(!close(cold.action, base.action));
 }
 
 /// A short variant of the CI config for the resume tests.
@@ -502,6 +598,24 @@ fn bad_config_key_is_an_error_naming_key_and_file_exit_2() {
     let stderr = exit_2_stderr(&[p.to_str().unwrap()]);
     assert!(
         stderr.contains("good.toml") && stderr.contains("train.grad_clip: must be a finite number"),
+        "{stderr}"
+    );
+}
+
+#[test]
+fn validate_without_a_checkpoint_exits_2_naming_the_directory() {
+    let _g = serial();
+    let run = tempfile::tempdir().unwrap();
+    let config = write_config(run.path(), &common::tiny_config(dataset()));
+    let stderr = exit_2_stderr(&[
+        config.to_str().unwrap(),
+        "--run-dir",
+        run.path().to_str().unwrap(),
+        "--validate",
+    ]);
+    assert!(stderr.contains("--validate: no checkpoint in"), "{stderr}");
+    assert!(
+        stderr.contains(&run.path().join("checkpoints").display().to_string()),
         "{stderr}"
     );
 }
