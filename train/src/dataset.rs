@@ -503,6 +503,19 @@ impl EpisodeSampler {
         self
     }
 
+    /// The options that shape what this sampler draws, as `[train]` keys and values (the seed
+    /// and the episode count are checked on their own): a resumed run must ask for the same.
+    pub fn options(&self) -> [(&'static str, String); 6] {
+        [
+            ("train.stagger", self.stagger.to_string()),
+            ("train.start_jitter", self.start_jitter.to_string()),
+            ("train.prefix_lanes", self.prefix_lanes.to_string()),
+            ("train.prefix_steps", self.prefix_steps.to_string()),
+            ("train.lane_pool", self.pool.to_string()),
+            ("train.memory_reset", self.memory_reset.to_string()),
+        ]
+    }
+
     /// Whether batches of `lanes` chunks are drawn from a pool of more lanes (then a chunk's
     /// [`ChunkSpan::lane`] is a row of the pool's memory, not its place in the batch).
     pub fn pooled(&self, lanes: usize) -> bool {

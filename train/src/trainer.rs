@@ -664,17 +664,21 @@ pub fn train(cfg: &Config, opts: &TrainOptions) -> Result<TrainSummary> {
             }
             // The episode sampler's options come from the checkpoint: a changed one is refused,
             // not ignored.
-            if let Some(e) = &l.state.episodes
-                && (e.pool, e.memory_reset) != (t.lane_pool, t.memory_reset)
+            if let (Some(saved), Some(asked)) = (&l.state.episodes, &Draw::new(&t, &data).episodes)
             {
-                return Err(TrainError::IncompatibleCheckpoint {
-                    path: l.dir,
-                    message: format!(
-                        "it was trained with `train.lane_pool = {}` and `train.memory_reset = {}`, \
-                         the config asks {} and {}",
-                        e.pool, e.memory_reset, t.lane_pool, t.memory_reset
-                    ),
-                });
+                let differ: Vec<String> = saved
+                    .options()
+                    .into_iter()
+                    .zip(asked.options())
+                    .filter(|(a, b)| a.1 != b.1)
+                    .map(|((key, was), (_, now))| format!("`{key} = {was}` (the config: {now})"))
+                    .collect();
+                if !differ.is_empty() {
+                    return Err(TrainError::IncompatibleCheckpoint {
+                        path: l.dir,
+                        message: format!("its episode sampler was made with {}", differ.join(", ")),
+                    });
+                }
             }
             let carry = checkpoint::read_carry(&l.dir, &ad)?;
             if l.state.sampler.len != data.train.len() {

@@ -776,7 +776,8 @@ fn incompatible_checkpoint_exits_2() {
     let p = write_config(dir.path(), &other);
     let stderr = exit_2_stderr(&[p.to_str().unwrap(), "--run-dir", run.to_str().unwrap()]);
     assert!(stderr.contains("incompatible checkpoint"), "{stderr}");
-    // The episode sampler's options are the checkpoint's: changing one is refused.
+    // The episode sampler's options are the checkpoint's: changing any is refused, naming each
+    // changed key.
     let mut pooled = cfg.clone();
     pooled.train.steps = 4;
     pooled.train.lane_pool = 3 * cfg.train.batch_size;
@@ -784,12 +785,29 @@ fn incompatible_checkpoint_exits_2() {
     assert_eq!(e.exit_code(), 2);
     assert!(
         e.to_string().contains(&format!(
-            "it was trained with `train.lane_pool = 0` and `train.memory_reset = 0`, the config \
-             asks {} and 0",
+            "its episode sampler was made with `train.lane_pool = 0` (the config: {})",
             3 * cfg.train.batch_size
         )),
         "{e}"
     );
+    let mut changed = cfg.clone();
+    changed.train.steps = 4;
+    changed.train.stagger = true;
+    changed.train.start_jitter = 5;
+    changed.train.memory_reset = 0.25;
+    let e = train::train(&changed, &opts(&run)).unwrap_err();
+    assert_eq!(e.exit_code(), 2);
+    assert!(
+        e.to_string().contains(
+            "its episode sampler was made with `train.stagger = false` (the config: true), \
+             `train.start_jitter = 0` (the config: 5), `train.memory_reset = 0` (the config: 0.25)"
+        ),
+        "{e}"
+    );
+    // The same options resume.
+    let mut same = cfg.clone();
+    same.train.steps = 3;
+    assert_eq!(train::train(&same, &opts(&run)).unwrap().step, 3);
     // --resume with nothing to resume is bad input too.
     let empty = dir.path().join("empty");
     let out = train_bin(&[
