@@ -348,6 +348,29 @@ impl Validation {
     }
 }
 
+/// A run's two validation logs and the last losses written to them.
+struct ValLogs {
+    windows: JsonlWriter,
+    walked: JsonlWriter,
+    loss: Option<f64>,
+    walk_loss: Option<f64>,
+}
+
+impl ValLogs {
+    /// Appends what `v` measured to its log.
+    fn write(&mut self, v: &Validation) -> Result<()> {
+        if let Some(r) = &v.windows {
+            self.loss = Some(r.loss);
+            self.windows.write(r)?;
+        }
+        if let Some(r) = &v.walked {
+            self.walk_loss = Some(r.loss);
+            self.walked.write(r)?;
+        }
+        Ok(())
+    }
+}
+
 /// Both validations of `model` at `step` as `cfg` asks for them.
 fn validations(
     model: &PolicyModel,
@@ -726,8 +749,12 @@ pub fn train(cfg: &Config, opts: &TrainOptions) -> Result<TrainSummary> {
     model::run::write_policy(&run, &info, &mcfg, &data.processor)?;
     write_file(&run.join("config.toml"), &config_toml)?;
     let mut train_log = JsonlWriter::open(&run.join("metrics.jsonl"), state.step)?;
-    let mut val_log = JsonlWriter::open(&run.join("val.jsonl"), state.step)?;
-    let mut walk_log = JsonlWriter::open(&run.join(VAL_WALK_FILE), state.step)?;
+    let mut val_logs = ValLogs {
+        windows: JsonlWriter::open(&run.join("val.jsonl"), state.step)?,
+        walked: JsonlWriter::open(&run.join(VAL_WALK_FILE), state.step)?,
+        loss: None,
+        walk_loss: None,
+    };
 
     let sched = WarmupCosine {
         lr: t.lr,
@@ -755,8 +782,6 @@ pub fn train(cfg: &Config, opts: &TrainOptions) -> Result<TrainSummary> {
     let elapsed_before = state.elapsed_s;
     let mut last_ckpt = resumed_from.clone();
     let mut recent: Vec<f64> = vec![];
-    let mut val_loss = None;
-    let mut val_walk_loss = None;
     let mut last_val_step = None;
     let val_due = |step: u64| t.val_every > 0 && step.is_multiple_of(t.val_every);
     // The loader thread draws from a copy of the sampler; the loop advances the saved one.
@@ -958,14 +983,7 @@ pub fn train(cfg: &Config, opts: &TrainOptions) -> Result<TrainSummary> {
                 state.step,
                 &device,
             )?;
-            if let Some(v) = &v.windows {
-                val_loss = Some(v.loss);
-                val_log.write(v)?;
-            }
-            if let Some(w) = &v.walked {
-                val_walk_loss = Some(w.loss);
-                walk_log.write(w)?;
-            }
+            val_logs.write(&v)?;
             if let Some(line) = v.line() {
                 bar.println(format!("step {}: {line}", state.step));
             }
@@ -998,14 +1016,7 @@ pub fn train(cfg: &Config, opts: &TrainOptions) -> Result<TrainSummary> {
             state.step,
             &device,
         )?;
-        if let Some(v) = &v.windows {
-            val_loss = Some(v.loss);
-            val_log.write(v)?;
-        }
-        if let Some(w) = &v.walked {
-            val_walk_loss = Some(w.loss);
-            walk_log.write(w)?;
-        }
+        val_logs.write(&v)?;
     }
     bar.finish_and_clear();
     plot_run(&run)?;
@@ -1020,8 +1031,8 @@ pub fn train(cfg: &Config, opts: &TrainOptions) -> Result<TrainSummary> {
         step: state.step,
         first_loss,
         final_loss: (!recent.is_empty()).then(|| recent.iter().sum::<f64>() / recent.len() as f64),
-        val_loss,
-        val_walk_loss,
+        val_loss: val_logs.loss,
+        val_walk_loss: val_logs.walk_loss,
         steps_per_s: if secs > 0.0 { done as f64 / secs } else { 0.0 },
         checkpoint: last_ckpt,
     })
