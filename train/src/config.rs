@@ -157,9 +157,10 @@ pub struct GenerateSpec {
     pub exec_noise: f64,
 }
 
-/// Whether a number is zero (serde: numbers left out of configs and checkpoints at their default).
-pub(crate) fn is_zero(v: &f64) -> bool {
-    *v == 0.0
+/// Whether a number is zero, its default (serde: numbers left out of configs and checkpoints at
+/// their default; counts, steps and chances alike).
+pub(crate) fn is_zero<T: Default + PartialEq>(v: &T) -> bool {
+    *v == T::default()
 }
 
 fn is_default_branch_rule(r: &sim::expert::BranchRule) -> bool {
@@ -302,7 +303,7 @@ pub struct TrainSection {
     /// that the time since the memory started does not tell where the demo is (a policy whose
     /// memory can tell the time may otherwise follow one path timed from the start instead of
     /// reading the scene). The skipped steps are not fed.
-    #[serde(skip_serializing_if = "crate::dataset::is_zero")]
+    #[serde(skip_serializing_if = "is_zero")]
     pub start_jitter: usize,
     /// `episodes` sampling: the first `prefix_lanes` lanes of each batch walk only the first
     /// `prefix_steps` steps of each episode (rounded up to whole chunks) and then take the next
@@ -311,10 +312,10 @@ pub struct TrainSection {
     /// move not a continuation of the moves before it; prefix lanes see episode starts
     /// `episode length / prefix_steps` times as often (0, the default: every lane walks whole
     /// episodes).
-    #[serde(skip_serializing_if = "crate::dataset::is_zero")]
+    #[serde(skip_serializing_if = "is_zero")]
     pub prefix_lanes: usize,
     /// Steps of each episode a prefix lane walks (see `prefix_lanes`; needs it).
-    #[serde(skip_serializing_if = "crate::dataset::is_zero")]
+    #[serde(skip_serializing_if = "is_zero")]
     pub prefix_steps: usize,
     /// `episodes` sampling: lanes kept walking episodes, each with its carried memory (0, the
     /// default: `batch_size`). With more, each step advances a seeded choice of `batch_size`
@@ -322,7 +323,7 @@ pub struct TrainSection {
     /// from `lane_pool` episodes at unrelated phases instead of the same `batch_size` episodes
     /// for the 20–90 steps each takes to walk (a waiting lane's memory is a few steps' weights
     /// old when it goes on, as stored states in recurrent replay).
-    #[serde(skip_serializing_if = "crate::dataset::is_zero")]
+    #[serde(skip_serializing_if = "is_zero")]
     pub lane_pool: usize,
     /// `episodes` sampling: the chance in [0, 1] that a chunk in the middle of an episode starts
     /// a cold memory, as the episode's first chunk does (0, the default: the memory is carried

@@ -16,9 +16,9 @@ use rand::seq::SliceRandom;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
-use crate::config::Config;
 #[cfg(feature = "generate")]
 use crate::config::GenerateSpec;
+use crate::config::{Config, is_zero};
 use crate::error::{Result, TrainError};
 
 /// Makes sure `[data].dir` holds a dataset: present → nothing to do; missing with
@@ -373,11 +373,6 @@ pub struct Lane {
     pub first: usize,
 }
 
-/// Whether a count is zero (serde: counts left out of configs and checkpoints at their default).
-pub(crate) fn is_zero(n: &usize) -> bool {
-    *n == 0
-}
-
 /// One chunk of a batch: which episode, from which step, and whether the lane starts the
 /// episode there (its carried memory is then not used).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -444,15 +439,11 @@ pub struct EpisodeSampler {
     /// memory as if it began the episode (0, the default: never), seeded per chunk by the episode,
     /// its epoch and the chunk's first step. Between carried memory (0) and independent
     /// windows (1): the memory a lane trains with spans `len / p` steps on average.
-    #[serde(default, skip_serializing_if = "crate::config::is_zero")]
+    #[serde(default, skip_serializing_if = "is_zero")]
     pub memory_reset: f64,
     /// Batches drawn from a lane pool so far (seeds the next choice of lanes).
-    #[serde(default, skip_serializing_if = "is_zero_u64")]
+    #[serde(default, skip_serializing_if = "is_zero")]
     pub picks: u64,
-}
-
-fn is_zero_u64(n: &u64) -> bool {
-    *n == 0
 }
 
 /// Seed of lane `lane`'s first stop, from the sampler's seed.
@@ -739,6 +730,25 @@ pub fn check_goals(data: &OpenedDataset) -> Result<()> {
 mod tests {
     use super::*;
 
+    /// Reads `a` back from its JSON (as a checkpoint holds it) and checks that the copy draws
+    /// the same next `n` batches of `lanes` chunks of `len` steps as `a` does.
+    fn assert_resumes_identically(
+        a: &mut EpisodeSampler,
+        n: usize,
+        lanes: usize,
+        len: usize,
+        lens: impl Fn(usize) -> usize + Copy,
+    ) {
+        let mut b: EpisodeSampler =
+            serde_json::from_str(&serde_json::to_string(&*a).unwrap()).unwrap();
+        for _ in 0..n {
+            assert_eq!(
+                a.next_batch(lanes, len, lens),
+                b.next_batch(lanes, len, lens)
+            );
+        }
+    }
+
     #[test]
     fn sampler_visits_every_sample_once_per_epoch_and_resumes_exactly() {
         let mut s = Sampler::new(7, 10);
@@ -793,14 +803,7 @@ mod tests {
         for _ in 0..5 {
             a.next_batch(2, 2, |k| lens[k]);
         }
-        let mut b: EpisodeSampler =
-            serde_json::from_str(&serde_json::to_string(&a).unwrap()).unwrap();
-        for _ in 0..7 {
-            assert_eq!(
-                a.next_batch(2, 2, |k| lens[k]),
-                b.next_batch(2, 2, |k| lens[k])
-            );
-        }
+        assert_resumes_identically(&mut a, 7, 2, 2, |k| lens[k]);
     }
 
     #[test]
@@ -831,11 +834,7 @@ mod tests {
         for _ in 0..30 {
             assert_eq!(a.next_batch(4, 3, lens), b.next_batch(4, 3, lens));
         }
-        let mut c: EpisodeSampler =
-            serde_json::from_str(&serde_json::to_string(&a).unwrap()).unwrap();
-        for _ in 0..30 {
-            assert_eq!(a.next_batch(4, 3, lens), c.next_batch(4, 3, lens));
-        }
+        assert_resumes_identically(&mut a, 30, 4, 3, lens);
         // Without jitter the draws are those of a sampler that never had the option.
         let mut plain = EpisodeSampler::new(5, 50, false);
         let mut zero = EpisodeSampler::new(5, 50, false).with_start_jitter(0);
@@ -888,11 +887,7 @@ mod tests {
         for _ in 0..20 {
             assert_eq!(a.next_batch(4, 3, lens), b.next_batch(4, 3, lens));
         }
-        let mut c: EpisodeSampler =
-            serde_json::from_str(&serde_json::to_string(&a).unwrap()).unwrap();
-        for _ in 0..50 {
-            assert_eq!(a.next_batch(4, 3, lens), c.next_batch(4, 3, lens));
-        }
+        assert_resumes_identically(&mut a, 50, 4, 3, lens);
         assert_ne!(
             EpisodeSampler::new(4, 40, false)
                 .with_lane_pool(12)
@@ -938,11 +933,7 @@ mod tests {
         let rate = reset as f64 / mid as f64;
         assert!((0.22..0.28).contains(&rate), "{reset} of {mid}");
         // Seeded per chunk: a resumed sampler continues identically.
-        let mut c: EpisodeSampler =
-            serde_json::from_str(&serde_json::to_string(&s).unwrap()).unwrap();
-        for _ in 0..40 {
-            assert_eq!(s.next_batch(4, 4, lens), c.next_batch(4, 4, lens));
-        }
+        assert_resumes_identically(&mut s, 40, 4, 4, lens);
         assert!(
             !serde_json::to_string(&plain)
                 .unwrap()
@@ -987,11 +978,7 @@ mod tests {
         for _ in 0..13 {
             a.next_batch(4, 3, lens);
         }
-        let mut b: EpisodeSampler =
-            serde_json::from_str(&serde_json::to_string(&a).unwrap()).unwrap();
-        for _ in 0..40 {
-            assert_eq!(a.next_batch(4, 3, lens), b.next_batch(4, 3, lens));
-        }
+        assert_resumes_identically(&mut a, 40, 4, 3, lens);
         // Without prefix lanes the draws are those of a sampler that never had the option, and
         // nothing new is written to the checkpoint.
         let mut plain = EpisodeSampler::new(5, 50, false);

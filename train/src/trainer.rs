@@ -425,12 +425,9 @@ fn new_optimizer(cfg: &Config) -> ModuleOptimizer {
 pub fn plot_run(run_dir: &Path) -> Result<Vec<PathBuf>> {
     let train = metrics::read(&run_dir.join("metrics.jsonl"))?;
     let val = metrics::read(&run_dir.join("val.jsonl"))?;
-    let walk_path = run_dir.join(VAL_WALK_FILE);
-    let walked = if walk_path.exists() {
-        metrics::read(&walk_path)?
-    } else {
-        vec![]
-    };
+    // Runs trained before the walked validation have no such file: no dots (a missing file
+    // reads as empty).
+    let walked = metrics::read(&run_dir.join(VAL_WALK_FILE))?;
     let dir = run_dir.join("plots");
     std::fs::create_dir_all(&dir).map_err(|e| TrainError::io(&dir, e))?;
     let mut out = vec![];
