@@ -236,3 +236,57 @@ fn t10_keeps_its_basket_under_the_gripper_rule() {
         assert_eq!(a.branch, b.branch, "seed {seed}");
     }
 }
+
+/// Runs `prefix` steps of a driver (the expert itself for `Some(cut)` → it is cut off there, or
+/// seeded random actions), then lets [`Expert::resume`] finish; (done without over-repetition,
+/// subgoals satisfied at the take-over, steps after it).
+fn take_over(task: &str, seed: u64, prefix: usize, random: bool) -> (bool, usize, usize) {
+    use rand::{Rng, SeedableRng};
+    let spec = registry::resolve(task).unwrap();
+    let mut env = Env::from_task(&spec, state_only()).unwrap();
+    let mut obs = env.reset(seed).unwrap();
+    let start = obs.eef_quat;
+    let mut driver = Expert::new(&spec, seed);
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
+    for _ in 0..prefix {
+        let a = if random {
+            std::array::from_fn(|_| rng.random_range(-0.5f32..=0.5))
+        } else {
+            driver
+                .act(&env, &obs)
+                .unwrap_or([0.0, 0.0, 0.0, 0.0, 0.0, 0.0, -1.0])
+        };
+        obs = env.step(&a).unwrap();
+    }
+    let at = obs.goal.as_ref().unwrap().satisfied;
+    let mut ex = Expert::resume(&spec, seed + 1, ExpertConfig::default(), start);
+    let mut steps = 0;
+    while steps < spec.max_steps {
+        let Some(a) = ex.act(&env, &obs) else { break };
+        obs = env.step(&a).unwrap();
+        steps += 1;
+    }
+    let g = obs.goal.unwrap();
+    (g.done && !g.failed, at, steps)
+}
+
+#[test]
+fn a_resumed_expert_finishes_what_another_driver_began() {
+    // Cut off mid-way through its own plan (T3 after the first placement, holding or carrying,
+    // and in the middle of T1's grasp), or after random actions, the take-over completes the
+    // goal without repeating what was counted.
+    let (ok, at, _) = take_over("libero_mem/t3", 3, 150, false);
+    assert!(ok && at >= 1, "t3 cut at 150: done {ok}, satisfied {at}");
+    for cut in [40, 70, 100] {
+        let (ok, at, steps) = take_over("libero_mem/t1", 1, cut, false);
+        assert!(ok, "t1 cut at {cut}: satisfied {at}, {steps} steps");
+    }
+    let (ok, _, _) = take_over("libero_mem/t1", 2, 30, true);
+    assert!(ok, "t1 after 30 random steps");
+    // Complete already: the take-over lets go and stays clear (no over-repetition).
+    let (ok, at, steps) = take_over("libero_mem/t1", 1, 199, false);
+    assert!(
+        ok && at == 1 && steps < 40,
+        "t1 complete: {ok} {at} {steps}"
+    );
+}

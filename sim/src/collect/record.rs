@@ -55,6 +55,19 @@ impl Recorder {
         seed: u64,
         opts: WriterOptions,
     ) -> Result<Recorder, RecordError> {
+        Recorder::create_with(path, env, task, seed, opts, &[])
+    }
+
+    /// [`create`](Self::create) with further `(key, value)` pairs in the episode metadata's
+    /// `extra` map (e.g. [`data::LABELLED_FROM`]).
+    pub fn create_with(
+        path: &Path,
+        env: &Env,
+        task: &TaskSpec,
+        seed: u64,
+        opts: WriterOptions,
+        extra: &[(&str, String)],
+    ) -> Result<Recorder, RecordError> {
         let scene = env
             .scene()
             .ok_or_else(|| RecordError::Setup("the environment has no task scene".into()))?;
@@ -87,6 +100,9 @@ impl Recorder {
                 .collect::<Vec<_>>()
                 .join(","),
         );
+        for (k, v) in extra {
+            meta.extra.insert((*k).to_string(), v.clone());
+        }
         Ok(Recorder {
             writer: EpisodeWriter::create(path, meta, opts)?,
             labels,

@@ -107,6 +107,8 @@ pub struct Expert {
     finished_hold: usize,
     /// The branch (Or goals) the plan follows.
     pub branch: usize,
+    /// Take over a running episode ([`Expert::resume`]): the hand's orientation at its start.
+    resume_from: Option<[f64; 4]>,
 }
 
 impl Expert {
@@ -142,7 +144,22 @@ impl Expert {
             speed,
             finished_hold: 0,
             branch: 0,
+            resume_from: None,
         }
+    }
+
+    /// An expert that takes over an episode already under way (DAgger's relabelling: a policy has
+    /// driven it so far). Its plan is built at the first [`act`](Self::act) from where the episode
+    /// stands: the subgoals the goal tracker has appended are skipped (an `Or` goal keeps to a branch
+    /// consistent with them), an object held by both fingers is carried on rather than grasped again,
+    /// and otherwise the hand opens, rises clear of the objects and turns back to its starting
+    /// orientation first. Once the goal is complete it lets go and stays clear. `start_quat`: the
+    /// hand's orientation (wxyz) at the episode's first observation, to which the plan's turns are
+    /// relative.
+    pub fn resume(task: &TaskSpec, seed: u64, cfg: ExpertConfig, start_quat: [f64; 4]) -> Expert {
+        let mut e = Expert::with_config(task, seed, cfg);
+        e.resume_from = Some(start_quat);
+        e
     }
 
     /// The action to execute for `action`, the latest one [`act`](Self::act) returned: the same,
@@ -172,10 +189,24 @@ impl Expert {
         let scene = env.scene()?;
         if !self.planned {
             self.planned = true;
-            self.init_rot = Some(quat_mat(obs.eef_quat));
+            self.init_rot = Some(quat_mat(self.resume_from.unwrap_or(obs.eef_quat)));
             let mut b = plan::Builder::new(scene, env, &mut self.rng, self.cfg.variation);
             b.branch_rule(self.cfg.branch_rule, obs.eef_pos);
-            let (ops, branch) = b.build(&self.task);
+            let (ops, branch) = match self.resume_from {
+                None => b.build(&self.task),
+                Some(_) => {
+                    let from = resume_point(env, obs);
+                    let (ops, branch) = b.build_from(&self.task, &from);
+                    let mut all = if from.held.is_none() {
+                        take_over_prefix(obs)
+                    } else {
+                        Vec::new()
+                    };
+                    all.extend(ops);
+                    self.last_satisfied = from.done;
+                    (all, branch)
+                }
+            };
             self.ops = ops;
             self.branch = branch;
         }
@@ -511,6 +542,55 @@ pub fn run_episode_in(
         failed: g.as_ref().is_some_and(|g| g.failed),
         end,
     })
+}
+
+/// Where a taken-over episode stands: the goal tracker's appended subgoals and the movable object
+/// both fingers hold (if any).
+fn resume_point(env: &Env, obs: &Observation) -> plan::From {
+    let (done, satisfied) = env
+        .tracker()
+        .map(|t| (t.satisfied_len(), t.satisfied().to_vec()))
+        .unwrap_or_default();
+    let held = env.scene().and_then(|scene| {
+        obs.objects.iter().enumerate().position(|(i, o)| {
+            o.grasped
+                && scene
+                    .instances
+                    .get(i)
+                    .is_some_and(|inst| inst.def.kind == crate::world::assets::AssetKind::Movable)
+        })
+    });
+    plan::From {
+        done,
+        satisfied,
+        held,
+    }
+}
+
+/// The first ops of a take-over with nothing held: open the hand, rise to 10 cm above the table
+/// when lower, turn back to the starting orientation.
+fn take_over_prefix(obs: &Observation) -> Vec<Op> {
+    let mut ops = vec![Op::Grip {
+        cmd: -1.0,
+        steps: 3,
+    }];
+    let clear = crate::world::scene::TABLE_TOP + 0.10;
+    if obs.eef_pos[2] < clear {
+        ops.push(Op::Move {
+            target: Target::RelZ(clear),
+            grip: -1.0,
+            tol: 0.01,
+            max: 30,
+            gain: 12.0,
+            until_pending: false,
+        });
+    }
+    ops.push(Op::Yaw {
+        yaw: 0.0,
+        grip: -1.0,
+        max: 25,
+    });
+    ops
 }
 
 fn short(op: &Op) -> String {

@@ -653,6 +653,14 @@ impl Env {
         }
     }
 
+    /// The goal tracker (task environments built from a task): the atoms satisfied so far.
+    pub fn tracker(&self) -> Option<&crate::task::GoalTracker> {
+        match &self.world {
+            World::Task(_, Some(t)) => Some(t),
+            _ => None,
+        }
+    }
+
     /// Goal progress now (task environments built from a task).
     pub fn goal(&self) -> Option<GoalStatus> {
         match &self.world {

@@ -42,6 +42,17 @@ pub fn subgoal_branches(g: &Goal) -> Vec<Vec<Vec<Atom>>> {
     }
 }
 
+/// Where a plan starts: the default is an episode's first step (nothing satisfied, nothing held).
+#[derive(Debug, Clone, Default)]
+pub(super) struct From {
+    /// Subgoals the goal tracker has appended.
+    pub done: usize,
+    /// Their atoms, in order (an `Or` goal's branch must contain them).
+    pub satisfied: Vec<Atom>,
+    /// The instance the fingers hold.
+    pub held: Option<usize>,
+}
+
 /// Builds a plan on the state at the first step.
 pub(super) struct Builder<'a> {
     scene: &'a Scene,
@@ -153,13 +164,49 @@ impl<'a> Builder<'a> {
 
     /// Chooses the branch and builds its ops. Returns (ops, branch index).
     pub(super) fn build(&mut self, task: &TaskSpec) -> (Vec<Op>, usize) {
+        self.build_from(task, &From::default())
+    }
+
+    /// Builds the ops that finish the goal from `from` (the progress a goal tracker has seen, what
+    /// the hand holds): the subgoals already satisfied are skipped, an `Or` goal keeps to a branch
+    /// consistent with them, a held object is carried on rather than grasped again. Returns (ops,
+    /// branch index).
+    pub(super) fn build_from(&mut self, task: &TaskSpec, from: &From) -> (Vec<Op>, usize) {
         let branches = subgoal_branches(&task.problem.goal);
-        let branch = self.choose_branch(&branches);
+        let consistent: Vec<usize> = (0..branches.len())
+            .filter(|&b| {
+                from.satisfied
+                    .iter()
+                    .all(|a| branches[b].iter().flatten().any(|x| x == a))
+            })
+            .collect();
+        let branch = if from.done == 0 || consistent.len() == branches.len() {
+            self.choose_branch(&branches)
+        } else {
+            consistent.first().copied().unwrap_or(0)
+        };
         let subgoals = branches[branch].clone();
+        self.held = from.held;
+        let env = self.env;
         let atoms: Vec<(usize, Atom)> = subgoals
             .iter()
             .enumerate()
-            .flat_map(|(i, s)| s.iter().map(move |a| (i, a.clone())))
+            .skip(from.done)
+            .flat_map(|(i, s)| {
+                // Within a conjunction, a state already reached (a drawer open, a stove on) needs
+                // no motion; positions (On, In) count only once the tracker has seen them.
+                let several = s.len() > 1;
+                s.iter()
+                    .filter(move |a| {
+                        !(several
+                            && matches!(a.predicate, Predicate::Open | Predicate::TurnOn)
+                            && env
+                                .predicates()
+                                .and_then(|p| p.eval(a.predicate, &a.args).ok())
+                                .unwrap_or(false))
+                    })
+                    .map(move |a| (i, a.clone()))
+            })
             .collect();
         for (k, (i, atom)) in atoms.iter().enumerate() {
             let next_obj = atoms
