@@ -322,6 +322,13 @@ pub fn build_index(dir: impl AsRef<Path>, opts: &IndexOptions) -> Result<Dataset
             let r = EpisodeReader::open(p)?;
             let (bytes, crc32) = (r.file_bytes().len() as u64, crc32fast::hash(r.file_bytes()));
             let raw = r.read_raw_steps(0..r.len())?;
+            // Statistics over labelled steps only (a policy's own actions before a take-over are
+            // not what training fits).
+            let labelled = r
+                .meta()
+                .labelled_from()
+                .map_err(|m| DataError::invalid(p, m))?
+                .min(raw.len());
             let mut texts = vec![r.meta().instruction.clone()];
             for s in &raw {
                 if texts.last() != Some(&s.progress.current_subgoal) {
@@ -351,7 +358,7 @@ pub fn build_index(dir: impl AsRef<Path>, opts: &IndexOptions) -> Result<Dataset
                     bytes: Some(bytes),
                     crc32: Some(crc32),
                 },
-                actions: raw.iter().map(|s| s.action).collect(),
+                actions: raw[labelled..].iter().map(|s| s.action).collect(),
                 states: raw.iter().map(|s| s.state).collect(),
                 texts,
                 fps: r.meta().fps,

@@ -234,7 +234,23 @@ impl Default for EpisodeMeta {
     }
 }
 
+/// Key of [`EpisodeMeta::extra`]: the first step whose recorded action is a label to learn from.
+/// Episodes a policy began and the scripted expert finished (DAgger, `eval dagger`) record the
+/// policy's own actions before it; training gives those no weight and the statistics leave them out.
+pub const LABELLED_FROM: &str = "labelled_from";
+
 impl EpisodeMeta {
+    /// The first step whose action is a label ([`LABELLED_FROM`]; 0, every step, when absent), or
+    /// the stored text when it is not a step number.
+    pub fn labelled_from(&self) -> std::result::Result<usize, String> {
+        match self.extra.get(LABELLED_FROM) {
+            None => Ok(0),
+            Some(v) => v
+                .parse()
+                .map_err(|_| format!("extra.{LABELLED_FROM} = {v:?} is not a step number")),
+        }
+    }
+
     /// Flattens to the string map stored in mcap; extra keys are prefixed with `extra.`.
     pub fn to_map(&self) -> BTreeMap<String, String> {
         let mut m = BTreeMap::new();

@@ -656,6 +656,10 @@ impl WindowDataset {
         let images = if c.images { frames(false)? } else { Vec::new() };
         let wrist_images = if c.wrist { Some(frames(true)?) } else { None };
         let end = self.idle_tail(k).unwrap_or(n);
+        let labelled_from = r
+            .meta()
+            .labelled_from()
+            .map_err(|m| DataError::invalid(r.path(), m))?;
         let mut objects: Vec<Vec<ObjectAnnotation>> = frame_steps
             .iter()
             .map(|&f| {
@@ -680,7 +684,10 @@ impl WindowDataset {
                 let a = (f + h).min(n - 1);
                 actions.extend(self.norm.normalize(&raw[a - lo].action));
                 action_mask.push(f + h < end);
-                let weight = if f + h < end {
+                let weight = if f + h < labelled_from {
+                    // The policy's own action before the expert took over: no label.
+                    0.0
+                } else if f + h < end {
                     1.0
                 } else if f + h < n {
                     c.idle_tail_weight

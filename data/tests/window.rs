@@ -687,3 +687,71 @@ fn pointer_targets_on_episodes_without_grasps_are_an_error() {
         "{e}"
     );
 }
+
+/// Writes `steps` as `dir/name` with `labelled_from` in the metadata (none: key absent).
+fn write_labelled(dir: &std::path::Path, name: &str, steps: &[StepRecord], from: Option<&str>) {
+    let mut meta = synthetic_meta(0);
+    if let Some(v) = from {
+        meta.extra.insert(LABELLED_FROM.into(), v.into());
+    }
+    let mut w = EpisodeWriter::create(dir.join(name), meta, WriterOptions::default()).unwrap();
+    for s in steps {
+        w.write_step(s).unwrap();
+    }
+    w.finish().unwrap();
+}
+
+#[test]
+fn steps_before_a_take_over_weigh_nothing_and_stay_out_of_the_statistics() {
+    let opts = SynthOptions {
+        size: 16,
+        segmentation: false,
+        depth: false,
+    };
+    let steps = synthetic_steps(12, 0, &opts);
+    // The same episode twice: as demonstrated, and with a policy's (wild) actions before step 5.
+    let mut taken_over = steps.clone();
+    for s in &mut taken_over[..5] {
+        s.action[0] = 50.0;
+    }
+    // The statistics see what a dataset of the demonstration and the labelled suffix would.
+    let plain_dir = tempfile::tempdir().unwrap();
+    write_labelled(plain_dir.path(), "a.mcap", &steps, None);
+    let mut suffix = steps[5..].to_vec();
+    for (i, s) in suffix.iter_mut().enumerate() {
+        s.step = i as u64;
+    }
+    write_labelled(plain_dir.path(), "b.mcap", &suffix, None);
+    let dir = tempfile::tempdir().unwrap();
+    write_labelled(dir.path(), "a.mcap", &steps, None);
+    write_labelled(dir.path(), "b.mcap", &taken_over, Some("5"));
+    let opts = IndexOptions {
+        val_fraction: 0.0,
+        seed: 0,
+    };
+    let (plain, both) = (
+        build_index(plain_dir.path(), &opts).unwrap(),
+        build_index(dir.path(), &opts).unwrap(),
+    );
+    assert!(both.stats.action.max[0] < 50.0);
+    assert_eq!(both.stats.action, plain.stats.action);
+    assert_eq!(both.stats.num_transitions, plain.stats.num_transitions);
+    // Frames 1–4 of each with actions (f, f + 1): the taken-over one's weights are 0 below step 5.
+    let (_, ds) = plain_and(dir.path(), |c| c);
+    let (a, b) = (ds.chunk(0, 1, 0).unwrap(), ds.chunk(1, 1, 0).unwrap());
+    assert_eq!(b.frame_steps, vec![1, 2, 3, 4]);
+    assert_eq!(a.action_weights, vec![1.0; 8]);
+    assert_eq!(
+        b.action_weights,
+        vec![0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0]
+    );
+    assert_eq!(b.action_mask, a.action_mask, "the frames stay real steps");
+    assert_eq!(ds.chunk(1, 5, 0).unwrap().action_weights, vec![1.0; 8]);
+    // Not a step number: one error naming the file and the key.
+    write_labelled(dir.path(), "c.mcap", &steps, Some("five"));
+    let err = build_index(dir.path(), &opts).unwrap_err().to_string();
+    assert!(
+        err.contains("c.mcap") && err.contains("labelled_from = \"five\""),
+        "{err}"
+    );
+}
