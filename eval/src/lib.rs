@@ -19,6 +19,7 @@
 
 #![warn(missing_docs)]
 
+pub mod dagger;
 pub mod error;
 pub mod experiment;
 pub mod policy;

@@ -146,6 +146,50 @@ enum Command {
         #[arg(long, value_parser = parse_backend)]
         backend: Option<model::backend::BackendKind>,
     },
+    /// DAgger's data: the run's policy drives each episode up to a step drawn from the budget,
+    /// the scripted expert re-plans from there and finishes it; the episodes it finishes are
+    /// recorded whole under OUT/<task folder>/ with the expert's steps as the only labels
+    /// (`labelled_from`), to train on beside the run's dataset (resumable: existing files are kept).
+    Dagger {
+        /// Training run directory whose policy drives.
+        #[arg(long)]
+        run: PathBuf,
+        /// Output folder (a suite dataset's layout).
+        #[arg(long)]
+        out: PathBuf,
+        /// Tasks, as for evaluation [default: the run's `[eval].tasks`, else libero_mem].
+        #[arg(long)]
+        tasks: Option<String>,
+        /// Episodes per task.
+        #[arg(long, default_value_t = 20)]
+        episodes: usize,
+        /// Base seed of the episodes (keep it apart from the evaluation's).
+        #[arg(long, default_value_t = 2000)]
+        seed: u64,
+        /// Earliest take-over, as a share of the task's step budget.
+        #[arg(long, default_value_t = 0.05)]
+        from: f64,
+        /// Latest take-over, as a share of the task's step budget.
+        #[arg(long, default_value_t = 0.9)]
+        to: f64,
+        /// Camera image side recorded (the dataset's).
+        #[arg(long, default_value_t = 32)]
+        image_size: usize,
+        /// How the expert chooses an `Or` goal's branch (`gripper`, `destination`), as the
+        /// dataset's generation did.
+        #[arg(long, default_value = "gripper")]
+        branch_rule: sim::expert::BranchRule,
+        /// The dataset the policy was trained on: its episodes are linked into OUT beside the
+        /// take-overs and OUT indexed as one dataset (its validation share and split seed).
+        #[arg(long)]
+        base: Option<PathBuf>,
+        /// Worker threads (one simulator and one policy each).
+        #[arg(long, default_value_t = 1)]
+        workers: usize,
+        /// No progress bar.
+        #[arg(long)]
+        quiet: bool,
+    },
     /// Temporal scaling: evaluate the repetition family at several repetition counts N.
     Scaling {
         /// Repetition counts (N unseen in training allowed), e.g. `3,5,7,9,12`.
@@ -280,6 +324,37 @@ fn main() -> ExitCode {
             backend,
         }) => serve(&run, &host, port, connections, backend),
         Some(Command::Scaling { repeats, eval }) => scaling(&eval, &repeats),
+        Some(Command::Dagger {
+            run,
+            out,
+            tasks,
+            episodes,
+            seed,
+            from,
+            to,
+            image_size,
+            branch_rule,
+            base,
+            workers,
+            quiet,
+        }) => dagger(
+            &run,
+            &out,
+            base.as_deref(),
+            tasks,
+            eval::dagger::DaggerConfig {
+                episodes,
+                seed,
+                take_over: (from, to),
+                image_size,
+                workers,
+                expert: sim::expert::ExpertConfig {
+                    branch_rule,
+                    ..sim::generate::plain_expert()
+                },
+            },
+            quiet,
+        ),
         Some(Command::Experiment {
             file,
             tables_only,
@@ -308,6 +383,76 @@ fn main() -> ExitCode {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => data::exit::report::<EvalError>(&e),
     }
+}
+
+/// `eval dagger`: take-over episodes of `run`'s policy into `out`, with a per-task summary
+/// (printed; every episode in the ledger OUT/dagger.jsonl).
+fn dagger(
+    run: &std::path::Path,
+    out: &std::path::Path,
+    base: Option<&std::path::Path>,
+    tasks: Option<String>,
+    cfg: eval::dagger::DaggerConfig,
+    quiet: bool,
+) -> anyhow::Result<()> {
+    if !(0.0..=1.0).contains(&cfg.take_over.0)
+        || !(0.0..=1.0).contains(&cfg.take_over.1)
+        || cfg.take_over.0 > cfg.take_over.1
+    {
+        return Err(EvalError::Argument(format!(
+            "--from {} --to {}: need 0 ≤ from ≤ to ≤ 1",
+            cfg.take_over.0, cfg.take_over.1
+        ))
+        .into());
+    }
+    let r = eval::run::open_at(run, None)?;
+    let device = eval::run::device(&r, None)?;
+    let spec = match tasks {
+        Some(t) => t,
+        None if !r.info.eval_tasks.is_empty() => r.info.eval_tasks.join(","),
+        None => "libero_mem".into(),
+    };
+    let tasks = eval::resolve_tasks(&spec, None)?;
+    let make =
+        || -> Result<Box<dyn Policy>, EvalError> { Ok(Box::new(eval::run::policy(&r, &device)?)) };
+    let bar = episodes_bar(quiet, (tasks.len() * cfg.episodes) as u64);
+    bar.set_prefix("dagger");
+    let kept = std::sync::atomic::AtomicUsize::new(0);
+    let progress = |t: &eval::dagger::TakeOver| {
+        let k =
+            kept.fetch_add(t.kept as usize, std::sync::atomic::Ordering::SeqCst) + t.kept as usize;
+        bar.inc(1);
+        bar.set_message(format!("{}: {k} kept", report::short(&t.task)));
+    };
+    let entries = eval::dagger::collect(&tasks, &make, &cfg, out, &progress)?;
+    bar.finish_and_clear();
+    println!("task  run  kept  mean take-over step  satisfied at take-over");
+    for task in &tasks {
+        let v: Vec<_> = entries.iter().filter(|t| t.task == task.id).collect();
+        if v.is_empty() {
+            continue;
+        }
+        let n = v.len() as f64;
+        println!(
+            "{:<5} {:>4} {:>5} {:>20.0} {:>23.2}",
+            report::short(&task.id),
+            v.len(),
+            v.iter().filter(|t| t.kept).count(),
+            v.iter().map(|t| t.at as f64).sum::<f64>() / n,
+            v.iter().map(|t| t.satisfied_at as f64).sum::<f64>() / n
+        );
+    }
+    if let Some(base) = base {
+        let index = eval::dagger::join_base(out, base)?;
+        println!(
+            "{}: {} episodes with {}'s, indexed (train on it with data.dir = {:?})",
+            out.display(),
+            index.episodes.len(),
+            base.display(),
+            out.display()
+        );
+    }
+    Ok(())
 }
 
 /// The resolved policy choice, with the run it loads.

@@ -683,3 +683,26 @@ fn videos_of_every_rollout_and_a_page_linking_them() {
         }
     }
 }
+
+#[test]
+fn dagger_bad_input_is_exit_2_and_writes_nothing() {
+    let tmp = tempfile::tempdir().unwrap();
+    let out = tmp.path().join("out");
+    let o = out.to_str().unwrap();
+    let run = tmp.path().join("run");
+    bare_run(&run);
+    let r = run.to_str().unwrap();
+    let (code, _, err) = eval(&[
+        "dagger", "--run", r, "--out", o, "--from", "0.9", "--to", "0.1",
+    ]);
+    assert_eq!(code, 2, "{err}");
+    assert!(err.contains("--from 0.9 --to 0.1"), "{err}");
+    let (code, _, err) = eval(&["dagger", "--run", r, "--out", o]);
+    assert_eq!(code, 2, "{err}");
+    assert!(err.contains("no complete checkpoint"), "{err}");
+    let nope = tmp.path().join("nope");
+    let (code, _, err) = eval(&["dagger", "--run", nope.to_str().unwrap(), "--out", o]);
+    assert_eq!(code, 2, "{err}");
+    assert!(err.contains("no such run directory"), "{err}");
+    assert!(!out.exists(), "nothing written on bad input");
+}

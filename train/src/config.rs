@@ -1392,6 +1392,7 @@ mod shipped {
             [
                 "libero_goal",
                 "libero_mem",
+                "libero_mem_dagger1",
                 "t1",
                 "t10",
                 "t2",
