@@ -237,10 +237,20 @@ fn t10_keeps_its_basket_under_the_gripper_rule() {
     }
 }
 
-/// Runs `prefix` steps of a driver (the expert itself for `Some(cut)` → it is cut off there, or
-/// seeded random actions), then lets [`Expert::resume`] finish; (done without over-repetition,
-/// subgoals satisfied at the take-over, steps after it).
-fn take_over(task: &str, seed: u64, prefix: usize, random: bool) -> (bool, usize, usize) {
+/// Where the first driver hands over to [`Expert::resume`].
+#[derive(Clone, Copy, Debug)]
+enum Cut {
+    /// After this many steps of the expert's own plan (idle once it has finished).
+    Steps(usize),
+    /// After this many seeded random actions.
+    Random(usize),
+    /// This many steps after the expert's fingers first hold an object.
+    Held(usize),
+}
+
+/// Drives `task` to `cut`, then lets [`Expert::resume`] finish; (done without over-repetition,
+/// subgoals satisfied at the take-over, an object held then, steps after it).
+fn take_over(task: &str, seed: u64, cut: Cut) -> (bool, usize, bool, usize) {
     use rand::{Rng, SeedableRng};
     let spec = registry::resolve(task).unwrap();
     let mut env = Env::from_task(&spec, state_only()).unwrap();
@@ -248,17 +258,30 @@ fn take_over(task: &str, seed: u64, prefix: usize, random: bool) -> (bool, usize
     let start = obs.eef_quat;
     let mut driver = Expert::new(&spec, seed);
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
-    for _ in 0..prefix {
-        let a = if random {
-            std::array::from_fn(|_| rng.random_range(-0.5f32..=0.5))
-        } else {
-            driver
+    let mut held_for = None;
+    for step in 0..spec.max_steps {
+        let held = obs.objects.iter().any(|o| o.grasped);
+        if held && held_for.is_none() {
+            held_for = Some(0);
+        }
+        let stop = match cut {
+            Cut::Steps(n) | Cut::Random(n) => step == n,
+            Cut::Held(n) => held_for == Some(n),
+        };
+        if stop {
+            break;
+        }
+        held_for = held_for.map(|h| h + 1);
+        let a = match cut {
+            Cut::Random(_) => std::array::from_fn(|_| rng.random_range(-0.5f32..=0.5)),
+            _ => driver
                 .act(&env, &obs)
-                .unwrap_or([0.0, 0.0, 0.0, 0.0, 0.0, 0.0, -1.0])
+                .unwrap_or([0.0, 0.0, 0.0, 0.0, 0.0, 0.0, -1.0]),
         };
         obs = env.step(&a).unwrap();
     }
     let at = obs.goal.as_ref().unwrap().satisfied;
+    let held = obs.objects.iter().any(|o| o.grasped);
     let mut ex = Expert::resume(&spec, seed + 1, ExpertConfig::default(), start);
     let mut steps = 0;
     while steps < spec.max_steps {
@@ -267,24 +290,35 @@ fn take_over(task: &str, seed: u64, prefix: usize, random: bool) -> (bool, usize
         steps += 1;
     }
     let g = obs.goal.unwrap();
-    (g.done && !g.failed, at, steps)
+    (g.done && !g.failed, at, held, steps)
 }
 
 #[test]
 fn a_resumed_expert_finishes_what_another_driver_began() {
-    // Cut off mid-way through its own plan (T3 after the first placement, holding or carrying,
-    // and in the middle of T1's grasp), or after random actions, the take-over completes the
-    // goal without repeating what was counted.
-    let (ok, at, _) = take_over("libero_mem/t3", 3, 150, false);
+    // Cut off mid-way through its own plan (T3 after the first placement; T1 before, during and
+    // after its grasp), or after random actions, the take-over completes the goal without
+    // repeating what was counted.
+    let (ok, at, _, _) = take_over("libero_mem/t3", 3, Cut::Steps(150));
     assert!(ok && at >= 1, "t3 cut at 150: done {ok}, satisfied {at}");
-    for cut in [40, 70, 100] {
-        let (ok, at, steps) = take_over("libero_mem/t1", 1, cut, false);
-        assert!(ok, "t1 cut at {cut}: satisfied {at}, {steps} steps");
+    for cut in [Cut::Steps(40), Cut::Steps(70), Cut::Steps(100)] {
+        let (ok, at, _, steps) = take_over("libero_mem/t1", 1, cut);
+        assert!(ok, "t1 cut at {cut:?}: satisfied {at}, {steps} steps");
     }
-    let (ok, _, _) = take_over("libero_mem/t1", 2, 30, true);
+    // Holding the bowl: carried on, not dropped and grasped again.
+    let (ok, at, held, steps) = take_over("libero_mem/t1", 1, Cut::Held(10));
+    assert!(held && ok && at == 0, "t1 held: {held} {ok} {at}");
+    let (_, _, _, fresh) = take_over("libero_mem/t1", 1, Cut::Steps(0));
+    assert!(
+        steps + 20 < fresh,
+        "carried on in {steps} steps, {fresh} from the start"
+    );
+    let (ok, _, _, _) = take_over("libero_mem/t1", 2, Cut::Random(30));
     assert!(ok, "t1 after 30 random steps");
+    // T7 (an Or goal) after its first subgoal: the branch the tracker has begun is finished.
+    let (ok, at, _, steps) = take_over("libero_mem/t7", 0, Cut::Steps(200));
+    assert!(ok && at >= 1, "t7 cut at 200: {ok} {at} {steps}");
     // Complete already: the take-over lets go and stays clear (no over-repetition).
-    let (ok, at, steps) = take_over("libero_mem/t1", 1, 199, false);
+    let (ok, at, _, steps) = take_over("libero_mem/t1", 1, Cut::Steps(199));
     assert!(
         ok && at == 1 && steps < 40,
         "t1 complete: {ok} {at} {steps}"
