@@ -17,14 +17,23 @@ fn a_zero_policy_handed_over_to_the_expert_gives_labelled_suffixes_and_one_datas
         take_over: (0.1, 0.3),
         ..DaggerConfig::default()
     };
-    let runs: Vec<TakeOver> = collect(
-        std::slice::from_ref(&task),
-        &zero,
-        &cfg,
-        out.path(),
-        &|_| {},
-    )
-    .unwrap();
+    // One collection into `out`: its episodes, and how many it ran.
+    let run = || -> (Vec<TakeOver>, usize) {
+        let ran = std::sync::atomic::AtomicUsize::new(0);
+        let eps = collect(
+            std::slice::from_ref(&task),
+            &zero,
+            &cfg,
+            out.path(),
+            &|_| {
+                ran.fetch_add(1, std::sync::atomic::Ordering::SeqCst);
+            },
+        )
+        .unwrap();
+        (eps, ran.into_inner())
+    };
+    let (runs, ran) = run();
+    assert_eq!(ran, 2);
     assert_eq!(runs.len(), 2);
     for r in &runs {
         // Within the asked share of T1's 200-step budget, drawn from the episode's seed.
@@ -52,31 +61,12 @@ fn a_zero_policy_handed_over_to_the_expert_gives_labelled_suffixes_and_one_datas
     }
     assert_ne!(runs[0].at, runs[1].at, "each episode draws its own step");
     // A second collection finds both in its ledger and runs nothing: the same records.
-    let ran = std::sync::atomic::AtomicUsize::new(0);
-    let again = collect(
-        std::slice::from_ref(&task),
-        &zero,
-        &cfg,
-        out.path(),
-        &|_| {
-            ran.fetch_add(1, std::sync::atomic::Ordering::SeqCst);
-        },
-    )
-    .unwrap();
-    assert_eq!((again, ran.into_inner()), (runs.clone(), 0));
+    assert_eq!(run(), (runs.clone(), 0));
     // A kept episode whose file is gone is run again, to the same file.
     let first = episode_path(out.path(), &task, 0);
     let bytes = std::fs::read(&first).unwrap();
     std::fs::remove_file(&first).unwrap();
-    let third = collect(
-        std::slice::from_ref(&task),
-        &zero,
-        &cfg,
-        out.path(),
-        &|_| {},
-    )
-    .unwrap();
-    assert_eq!(third, runs);
+    assert_eq!(run(), (runs.clone(), 1));
     assert_eq!(
         std::fs::read(&first).unwrap(),
         bytes,
