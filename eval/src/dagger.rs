@@ -66,7 +66,7 @@ pub struct TakeOver {
     pub at: usize,
     /// Subgoals satisfied when it took over.
     pub satisfied_at: usize,
-    /// Steps the expert ran.
+    /// Steps the expert ran (0: the policy had over-repeated before the take-over, no expert).
     pub expert_steps: usize,
     /// Kept: the expert finished the goal without over-repetition (the file was written).
     pub kept: bool,

@@ -426,18 +426,25 @@ fn dagger(
     };
     let entries = eval::dagger::collect(&tasks, &make, &cfg, out, &progress)?;
     bar.finish_and_clear();
-    println!("task  run  kept  mean take-over step  satisfied at take-over");
+    // An episode the policy had over-repeated before the take-over ends there (no expert step).
+    println!(
+        "task  run  over-repeated first  expert finished (kept)  mean take-over step  satisfied at take-over"
+    );
     for task in &tasks {
         let v: Vec<_> = entries.iter().filter(|t| t.task == task.id).collect();
         if v.is_empty() {
             continue;
         }
         let n = v.len() as f64;
+        let first = v.iter().filter(|t| !t.kept && t.expert_steps == 0).count();
+        let kept = v.iter().filter(|t| t.kept).count();
         println!(
-            "{:<5} {:>4} {:>5} {:>20.0} {:>23.2}",
+            "{:<5} {:>4} {:>20} {:>15} of {:<6} {:>20.0} {:>23.2}",
             report::short(&task.id),
             v.len(),
-            v.iter().filter(|t| t.kept).count(),
+            first,
+            kept,
+            v.len() - first,
             v.iter().map(|t| t.at as f64).sum::<f64>() / n,
             v.iter().map(|t| t.satisfied_at as f64).sum::<f64>() / n
         );
