@@ -62,11 +62,15 @@ pub struct TakeOver {
     pub episode: usize,
     /// Reset seed.
     pub seed: u64,
-    /// The step the expert took over at.
+    /// The earliest take-over step drawn.
+    #[serde(default)]
+    pub from: usize,
+    /// The step the expert took over at (the budget: it could not).
     pub at: usize,
     /// Subgoals satisfied when it took over.
     pub satisfied_at: usize,
-    /// Steps the expert ran (0: the policy had over-repeated before the take-over, no expert).
+    /// Steps the expert ran (0: no take-over — the policy had over-repeated first, or the
+    /// budget ended before a state the expert can take over from).
     pub expert_steps: usize,
     /// Kept: the expert finished the goal without over-repetition (the file was written).
     pub kept: bool,
@@ -88,14 +92,18 @@ pub fn take_over_step(task: &TaskSpec, seed: u64, share: (f64, f64)) -> usize {
 const HOLD_AFTER_DONE: usize = 5;
 
 /// Runs one take-over episode in `env` (built for `task`, rendering with segmentation): `policy`
-/// for `at` steps, then the expert until its plan ends or the goal has held for a few steps (at
-/// most the task's budget again); writes `path` when the expert finishes the goal.
+/// drives from the reset until the first step from `from` on where the expert can take over
+/// ([`sim::expert::can_take_over`]; none before the budget ends: nothing is kept), then the expert
+/// runs until its plan ends or the goal has held for a few steps (at most the task's budget
+/// again); writes `path` when the expert finishes the goal. The policy's part is found first and
+/// then replayed into the recording (the metadata, written first, holds the take-over step): the
+/// simulator repeats a seed's episode exactly, which the replay checks.
 pub fn record_take_over(
     env: &mut Env,
     task: &TaskSpec,
     policy: &mut dyn Policy,
     seed: u64,
-    at: usize,
+    from: usize,
     expert: &ExpertConfig,
     path: &Path,
 ) -> Result<TakeOver, EvalError> {
@@ -106,6 +114,30 @@ pub fn record_take_over(
     policy.reset(task, seed)?;
     let mut obs = env.reset(seed)?;
     let start_quat = obs.eef_quat;
+    let mut actions = Vec::new();
+    while actions.len() < task.max_steps
+        && !(actions.len() >= from && sim::expert::can_take_over(&obs))
+    {
+        let a = policy.act(env, &obs)?;
+        obs = env.step(&a)?;
+        actions.push(a);
+    }
+    let at = actions.len();
+    let reached = obs.state;
+    let mut result = TakeOver {
+        task: task.id.clone(),
+        episode: 0,
+        seed,
+        from,
+        at,
+        satisfied_at: obs.goal.as_ref().map_or(0, |g| g.satisfied),
+        expert_steps: 0,
+        kept: false,
+    };
+    if at >= task.max_steps || obs.goal.as_ref().is_some_and(|g| g.failed) {
+        return Ok(result);
+    }
+    let mut obs = env.reset(seed)?;
     let mut rec = Recorder::create_with(
         path,
         env,
@@ -115,26 +147,18 @@ pub fn record_take_over(
         &[(data::LABELLED_FROM, at.to_string())],
     )
     .map_err(out_err)?;
-    for _ in 0..at {
-        let a = policy.act(env, &obs)?;
+    for a in actions {
         let next = env.step(&a)?;
         rec.record(env, &obs, a, &next).map_err(out_err)?;
         obs = next;
     }
-    let goal = |o: &sim::Observation| o.goal.clone().unwrap_or_default();
-    let before = goal(&obs);
-    let mut result = TakeOver {
-        task: task.id.clone(),
-        episode: 0,
-        seed,
-        at,
-        satisfied_at: before.satisfied,
-        expert_steps: 0,
-        kept: false,
-    };
-    if before.failed {
-        return Ok(result);
+    if obs.state != reached {
+        return Err(EvalError::Model(format!(
+            "{} seed {seed}: the replay of the policy's {at} steps reached another state",
+            task.id
+        )));
     }
+    let goal = |o: &sim::Observation| o.goal.clone().unwrap_or_default();
     let mut ex = Expert::resume(task, seed, expert.clone(), start_quat);
     let mut after_done = 0;
     while result.expert_steps < task.max_steps {
@@ -296,9 +320,10 @@ pub fn collect(
         let work = |(policy, env): &mut (Box<dyn Policy>, Env), i: usize| {
             let k = todo[i];
             let seed = episode_seed(cfg.seed, k as u64);
-            let at = take_over_step(task, seed, cfg.take_over);
+            let from = take_over_step(task, seed, cfg.take_over);
             let path = episode_path(out, task, k);
-            let mut r = record_take_over(env, task, policy.as_mut(), seed, at, &cfg.expert, &path)?;
+            let mut r =
+                record_take_over(env, task, policy.as_mut(), seed, from, &cfg.expert, &path)?;
             r.episode = k;
             {
                 use std::io::Write;

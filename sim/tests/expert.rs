@@ -324,3 +324,28 @@ fn a_resumed_expert_finishes_what_another_driver_began() {
         "t1 complete: {ok} {at} {steps}"
     );
 }
+
+#[test]
+fn take_overs_wait_while_the_open_hand_is_low() {
+    // Along T1's demonstration: possible at the start (the hand high), not on the way down to the
+    // grasp (low, open), again once the bowl is held, and after the goal is complete.
+    let spec = registry::resolve("libero_mem/t1").unwrap();
+    let mut env = Env::from_task(&spec, state_only()).unwrap();
+    let mut obs = env.reset(1).unwrap();
+    let mut ex = Expert::new(&spec, 1);
+    let mut seen = Vec::new();
+    while let Some(a) = ex.act(&env, &obs) {
+        let held = obs.objects.iter().any(|o| o.grasped);
+        seen.push((sim::expert::can_take_over(&obs), held));
+        obs = env.step(&a).unwrap();
+    }
+    assert!(seen[0].0, "at the start");
+    let first_held = seen.iter().position(|s| s.1).unwrap();
+    assert!(
+        seen[..first_held].iter().any(|s| !s.0),
+        "the descent to the grasp"
+    );
+    assert!(seen[first_held].0, "holding the bowl");
+    assert!(obs.goal.as_ref().unwrap().done);
+    assert!(sim::expert::can_take_over(&obs), "complete");
+}

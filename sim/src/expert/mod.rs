@@ -567,14 +567,41 @@ fn resume_point(env: &Env, obs: &Observation) -> plan::From {
     }
 }
 
-/// The first ops of a take-over with nothing held: open the hand, rise to 10 cm above the table
-/// when lower, turn back to the starting orientation.
+/// Height above the table from which a take-over needs no rise first.
+const TAKE_OVER_CLEAR: f64 = 0.10;
+
+/// Finger opening (sum of both finger joints, m) below which the hand counts as closed.
+const FINGERS_OPEN: f32 = 0.06;
+
+/// Whether the fingers are closed (or closing), from the observation's finger joints.
+fn fingers_closed(obs: &Observation) -> bool {
+    obs.state[6].abs() + obs.state[7].abs() < FINGERS_OPEN
+}
+
+/// Whether [`Expert::resume`] can take over at `obs` with a plan that goes on as the
+/// demonstrations do from such a state: the goal complete, an object held, the fingers closed on
+/// nothing (a missed grasp: open and start again), or the hand at least 10 cm above the table. Low
+/// with the hand open — on the way down to a grasp, or just let go — its plan would first rise,
+/// a label at odds with the demonstrations' at those states.
+pub fn can_take_over(obs: &Observation) -> bool {
+    let complete = obs.goal.as_ref().is_some_and(|g| g.satisfied >= g.goal_len);
+    complete
+        || obs.objects.iter().any(|o| o.grasped)
+        || fingers_closed(obs)
+        || obs.eef_pos[2] >= crate::world::scene::TABLE_TOP + TAKE_OVER_CLEAR
+}
+
+/// The first ops of a take-over with nothing held: open the hand when closed, rise to 10 cm above
+/// the table when lower, turn back to the starting orientation.
 fn take_over_prefix(obs: &Observation) -> Vec<Op> {
-    let mut ops = vec![Op::Grip {
-        cmd: -1.0,
-        steps: 3,
-    }];
-    let clear = crate::world::scene::TABLE_TOP + 0.10;
+    let mut ops = Vec::new();
+    if fingers_closed(obs) {
+        ops.push(Op::Grip {
+            cmd: -1.0,
+            steps: 3,
+        });
+    }
+    let clear = crate::world::scene::TABLE_TOP + TAKE_OVER_CLEAR;
     if obs.eef_pos[2] < clear {
         ops.push(Op::Move {
             target: Target::RelZ(clear),
