@@ -152,8 +152,8 @@ impl Expert {
     /// driven it so far). Its plan is built at the first [`act`](Self::act) from where the episode
     /// stands: the subgoals the goal tracker has appended are skipped (an `Or` goal keeps to a branch
     /// consistent with them), an object held by both fingers is carried on rather than grasped again,
-    /// and otherwise the hand opens, rises clear of the objects and turns back to its starting
-    /// orientation first. Once the goal is complete it lets go and stays clear. `start_quat`: the
+    /// and otherwise the hand opens (when closed), rises clear of the objects (when low) and turns
+    /// back to its starting orientation (when turned more than 0.15 rad away) first. Once the goal is complete it lets go and stays clear. `start_quat`: the
     /// hand's orientation (wxyz) at the episode's first observation, to which the plan's turns are
     /// relative.
     pub fn resume(task: &TaskSpec, seed: u64, cfg: ExpertConfig, start_quat: [f64; 4]) -> Expert {
@@ -197,8 +197,9 @@ impl Expert {
                 Some(_) => {
                     let from = resume_point(env, obs);
                     let (ops, branch) = b.build_from(&self.task, &from);
+                    let start = self.init_rot.unwrap_or_else(Matrix3::identity);
                     let mut all = if from.held.is_none() {
-                        take_over_prefix(obs)
+                        take_over_prefix(obs, &start)
                     } else {
                         Vec::new()
                     };
@@ -591,9 +592,14 @@ pub fn can_take_over(obs: &Observation) -> bool {
         || obs.eef_pos[2] >= crate::world::scene::TABLE_TOP + TAKE_OVER_CLEAR
 }
 
+/// Orientation error (rad) from the start beyond which a take-over turns the hand back first;
+/// below it the moves go on with the hand as it is, as the demonstrations' moves do (they send
+/// no rotation).
+const TAKE_OVER_TURN: f64 = 0.15;
+
 /// The first ops of a take-over with nothing held: open the hand when closed, rise to 10 cm above
-/// the table when lower, turn back to the starting orientation.
-fn take_over_prefix(obs: &Observation) -> Vec<Op> {
+/// the table when lower, turn back to the starting orientation when turned away from it.
+fn take_over_prefix(obs: &Observation, start: &Matrix3<f64>) -> Vec<Op> {
     let mut ops = Vec::new();
     if fingers_closed(obs) {
         ops.push(Op::Grip {
@@ -612,11 +618,13 @@ fn take_over_prefix(obs: &Observation) -> Vec<Op> {
             until_pending: false,
         });
     }
-    ops.push(Op::Yaw {
-        yaw: 0.0,
-        grip: -1.0,
-        max: 25,
-    });
+    if orientation_error(start, &quat_mat(obs.eef_quat)).norm() > TAKE_OVER_TURN {
+        ops.push(Op::Yaw {
+            yaw: 0.0,
+            grip: -1.0,
+            max: 25,
+        });
+    }
     ops
 }
 
