@@ -426,9 +426,10 @@ fn dagger(
     };
     let entries = eval::dagger::collect(&tasks, &make, &cfg, out, &progress)?;
     bar.finish_and_clear();
-    // An episode the policy had over-repeated before the take-over ends there (no expert step).
+    // No take-over (no expert step): the policy had over-repeated first, or the budget ended
+    // before a state the expert can take over from.
     println!(
-        "task  run  over-repeated first  expert finished (kept)  mean take-over step  satisfied at take-over"
+        "task  run  no take-over  expert finished (kept)  mean take-over step  satisfied at take-over"
     );
     for task in &tasks {
         let v: Vec<_> = entries.iter().filter(|t| t.task == task.id).collect();
@@ -436,15 +437,15 @@ fn dagger(
             continue;
         }
         let n = v.len() as f64;
-        let first = v.iter().filter(|t| !t.kept && t.expert_steps == 0).count();
+        let none = v.iter().filter(|t| !t.kept && t.expert_steps == 0).count();
         let kept = v.iter().filter(|t| t.kept).count();
         println!(
-            "{:<5} {:>4} {:>20} {:>15} of {:<6} {:>20.0} {:>23.2}",
+            "{:<5} {:>4} {:>13} {:>15} of {:<6} {:>20.0} {:>23.2}",
             report::short(&task.id),
             v.len(),
-            first,
+            none,
             kept,
-            v.len() - first,
+            v.len() - none,
             v.iter().map(|t| t.at as f64).sum::<f64>() / n,
             v.iter().map(|t| t.satisfied_at as f64).sum::<f64>() / n
         );
