@@ -38,6 +38,8 @@ pub struct DaggerConfig {
     pub workers: usize,
     /// The expert that takes over.
     pub expert: ExpertConfig,
+    /// The driving policy, as the collection's settings name it (e.g. the run and its step).
+    pub source: String,
 }
 
 impl Default for DaggerConfig {
@@ -49,6 +51,79 @@ impl Default for DaggerConfig {
             image_size: 32,
             workers: 1,
             expert: sim::generate::plain_expert(),
+            source: String::new(),
+        }
+    }
+}
+
+/// The settings a collection into one folder keeps (`OUT/`[`SETTINGS`]): the episodes of its
+/// ledger belong to them.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Settings {
+    /// [`DaggerConfig::source`].
+    pub source: String,
+    /// [`DaggerConfig::seed`].
+    pub seed: u64,
+    /// [`DaggerConfig::take_over`].
+    pub take_over: (f64, f64),
+    /// [`DaggerConfig::image_size`].
+    pub image_size: usize,
+    /// [`DaggerConfig::expert`], as Rust's debug text.
+    pub expert: String,
+}
+
+/// The file of a collection's [`Settings`].
+pub const SETTINGS: &str = "dagger_settings.json";
+
+impl DaggerConfig {
+    /// The settings this collection keeps (not the episode count or the workers, which may change
+    /// between runs into one folder).
+    pub fn settings(&self) -> Settings {
+        Settings {
+            source: self.source.clone(),
+            seed: self.seed,
+            take_over: self.take_over,
+            image_size: self.image_size,
+            expert: format!("{:?}", self.expert),
+        }
+    }
+}
+
+/// Writes `OUT/`[`SETTINGS`] the first time; later collections into `out` must have the same
+/// settings (else an error naming the file and the first setting that differs).
+fn check_settings(out: &Path, cfg: &DaggerConfig) -> Result<(), EvalError> {
+    let path = out.join(SETTINGS);
+    let want = cfg.settings();
+    match std::fs::read_to_string(&path) {
+        Err(_) => {
+            let json = serde_json::to_string_pretty(&want).expect("settings serialise");
+            crate::write_atomic(&path, json.as_bytes())
+        }
+        Ok(text) => {
+            let have: Settings = serde_json::from_str(&text).map_err(|e| EvalError::Input {
+                path: path.clone(),
+                message: format!("not DAgger settings: {e}"),
+            })?;
+            let differs = [
+                ("source (--run)", have.source != want.source),
+                ("seed", have.seed != want.seed),
+                (
+                    "take-over share (--from/--to)",
+                    have.take_over != want.take_over,
+                ),
+                ("image size", have.image_size != want.image_size),
+                ("expert (--branch-rule)", have.expert != want.expert),
+            ];
+            match differs.iter().find(|d| d.1) {
+                None => Ok(()),
+                Some((what, _)) => Err(EvalError::Input {
+                    path,
+                    message: format!(
+                        "this folder holds a collection with another {what}: {have:?}, now {want:?} \
+                         (collect into another folder)"
+                    ),
+                }),
+            }
         }
     }
 }
@@ -271,6 +346,7 @@ pub fn collect(
         path: out.to_path_buf(),
         message: e.to_string(),
     })?;
+    check_settings(out, cfg)?;
     let earlier = read_ledger(out)?;
     let ledger_path = out.join(LEDGER);
     let ledger = Mutex::new(

@@ -352,6 +352,7 @@ fn main() -> ExitCode {
                     branch_rule,
                     ..sim::generate::plain_expert()
                 },
+                source: String::new(),
             },
             quiet,
         ),
@@ -406,6 +407,10 @@ fn dagger(
         .into());
     }
     let r = eval::run::open_at(run, None)?;
+    let cfg = eval::dagger::DaggerConfig {
+        source: format!("{} (step {})", r.dir.display(), r.step),
+        ..cfg
+    };
     let device = eval::run::device(&r, None)?;
     let spec = match tasks {
         Some(t) => t,

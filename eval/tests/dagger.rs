@@ -74,6 +74,26 @@ fn a_zero_policy_handed_over_to_the_expert_gives_labelled_suffixes_and_one_datas
     );
     assert_eq!(eval::dagger::read_ledger(out.path()).unwrap().len(), 3);
 
+    // Another take-over share into the same folder: one error naming the settings file.
+    let other = DaggerConfig {
+        take_over: (0.2, 0.3),
+        ..cfg.clone()
+    };
+    let err = collect(
+        std::slice::from_ref(&task),
+        &zero,
+        &other,
+        out.path(),
+        &|_| {},
+    )
+    .unwrap_err();
+    assert!(
+        err.to_string().contains(eval::dagger::SETTINGS)
+            && err.to_string().contains("take-over share"),
+        "{err}"
+    );
+    assert_eq!(err.exit_code(), 2);
+
     // The base dataset joins them: one index over both, with the base's split settings.
     let base = tempfile::tempdir().unwrap();
     sim::generate::generate(
