@@ -305,26 +305,10 @@ pub fn join_base(out: &Path, base: &Path) -> Result<data::DatasetIndex, EvalErro
     )?)
 }
 
-/// The ledger of a collection: one [`TakeOver`] per line, appended as episodes finish.
+/// The ledger of a collection: a journal (the evaluation's format, keyed by the collection's
+/// [`Settings`]) of one [`TakeOver`] per line, appended as episodes finish; a torn last line (a
+/// killed collection) is dropped when it is opened again.
 pub const LEDGER: &str = "dagger.jsonl";
-
-/// The ledger's entries (none when there is no ledger).
-pub fn read_ledger(out: &Path) -> Result<Vec<TakeOver>, EvalError> {
-    let path = out.join(LEDGER);
-    let Ok(text) = std::fs::read_to_string(&path) else {
-        return Ok(Vec::new());
-    };
-    text.lines()
-        .enumerate()
-        .filter(|(_, l)| !l.trim().is_empty())
-        .map(|(i, l)| {
-            serde_json::from_str(l).map_err(|e| EvalError::Results {
-                path: path.clone(),
-                message: format!("line {}: not a take-over record: {e}", i + 1),
-            })
-        })
-        .collect()
-}
 
 /// Collects `cfg.episodes` take-over episodes of every task into `out` (see the module docs),
 /// each recorded in the ledger `OUT/`[`LEDGER`]; a re-run skips the episodes the ledger holds
@@ -347,15 +331,10 @@ pub fn collect(
         message: e.to_string(),
     })?;
     check_settings(out, cfg)?;
-    let earlier = read_ledger(out)?;
     let ledger_path = out.join(LEDGER);
-    let ledger = Mutex::new(
-        std::fs::OpenOptions::new()
-            .create(true)
-            .append(true)
-            .open(&ledger_path)
-            .map_err(|e| data::DataError::io(&ledger_path, e))?,
-    );
+    let key = serde_json::to_string(&cfg.settings()).expect("settings serialise");
+    let (earlier, file) = crate::open_journal::<TakeOver>(&ledger_path, &key)?;
+    let ledger = Mutex::new(file);
     let mut all = Vec::new();
     for task in tasks {
         let dir = task_dir(out, task);

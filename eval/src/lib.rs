@@ -88,16 +88,20 @@ pub struct EvalConfig {
 pub const JOURNAL_FORMAT: &str = "libero-mem-rs/eval-journal/1";
 
 /// Opens `path` as the journal of the evaluation `key` (seed, budget and protocol settings of
-/// `cfg` included): the episodes it holds (a torn last line is dropped), rewritten so that the
+/// `cfg` included): the records it holds (a torn last line is dropped), rewritten so that the
 /// file is whole, and the file to append to. A journal of another evaluation is replaced.
-fn open_journal(path: &Path, key: &str) -> Result<(Vec<EpisodeResult>, std::fs::File), EvalError> {
+/// Evaluations journal [`EpisodeResult`]s, DAgger collections their take-overs.
+pub(crate) fn open_journal<T: serde::Serialize + serde::de::DeserializeOwned>(
+    path: &Path,
+    key: &str,
+) -> Result<(Vec<T>, std::fs::File), EvalError> {
     let header = serde_json::json!({"format": JOURNAL_FORMAT, "evaluation": key}).to_string();
     let mut kept = Vec::new();
     if let Ok(text) = std::fs::read_to_string(path) {
         let mut lines = text.lines();
         if lines.next() == Some(header.as_str()) {
             for line in lines {
-                match serde_json::from_str::<EpisodeResult>(line) {
+                match serde_json::from_str::<T>(line) {
                     Ok(e) => kept.push(e),
                     Err(_) => break,
                 }
@@ -384,7 +388,7 @@ pub fn evaluate(
     );
     let (journaled, journal) = match &cfg.journal {
         Some(p) => {
-            let (kept, file) = open_journal(p, &key)?;
+            let (kept, file) = open_journal::<EpisodeResult>(p, &key)?;
             (kept, Some(Mutex::new(file)))
         }
         None => (Vec::new(), None),

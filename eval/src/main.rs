@@ -146,10 +146,11 @@ enum Command {
         #[arg(long, value_parser = parse_backend)]
         backend: Option<model::backend::BackendKind>,
     },
-    /// DAgger's data: the run's policy drives each episode up to a step drawn from the budget,
-    /// the scripted expert re-plans from there and finishes it; the episodes it finishes are
-    /// recorded whole under OUT/<task folder>/ with the expert's steps as the only labels
-    /// (`labelled_from`), to train on beside the run's dataset (resumable: existing files are kept).
+    /// DAgger's data: the run's policy drives each episode up to a step drawn from the budget
+    /// (and on to a state the expert can take over from), the scripted expert re-plans from there
+    /// and finishes it; the episodes it finishes are recorded whole under OUT/dagger_<task
+    /// folder>/ with the expert's steps as the only labels (`labelled_from`), to train on beside
+    /// the run's dataset (resumable from the ledger OUT/dagger.jsonl).
     Dagger {
         /// Training run directory whose policy drives.
         #[arg(long)]

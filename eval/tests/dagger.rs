@@ -72,7 +72,16 @@ fn a_zero_policy_handed_over_to_the_expert_gives_labelled_suffixes_and_one_datas
         bytes,
         "same seed, same episode"
     );
-    assert_eq!(eval::dagger::read_ledger(out.path()).unwrap().len(), 3);
+    // The ledger: its header and three records.
+    let ledger = std::fs::read_to_string(out.path().join(eval::dagger::LEDGER)).unwrap();
+    assert_eq!(ledger.lines().count(), 4, "{ledger}");
+    // A collection killed mid-line leaves a torn record: it is dropped, the whole ones kept.
+    std::fs::write(
+        out.path().join(eval::dagger::LEDGER),
+        format!("{ledger}{{\"task\": \"libero_mem/t1\", \"epi"),
+    )
+    .unwrap();
+    assert_eq!(run(), (runs.clone(), 0));
 
     // Another take-over share into the same folder: one error naming the settings file.
     let other = DaggerConfig {

@@ -153,9 +153,9 @@ impl Expert {
     /// stands: the subgoals the goal tracker has appended are skipped (an `Or` goal keeps to a branch
     /// consistent with them), an object held by both fingers is carried on rather than grasped again,
     /// and otherwise the hand opens (when closed), rises clear of the objects (when low) and turns
-    /// back to its starting orientation (when turned more than 0.15 rad away) first. Once the goal is complete it lets go and stays clear. `start_quat`: the
-    /// hand's orientation (wxyz) at the episode's first observation, to which the plan's turns are
-    /// relative.
+    /// back to its starting orientation (when turned more than 0.15 rad away) first. Once the goal
+    /// is complete it lets go and stays clear. `start_quat`: the hand's orientation (wxyz) at the
+    /// episode's first observation, to which the plan's turns are relative.
     pub fn resume(task: &TaskSpec, seed: u64, cfg: ExpertConfig, start_quat: [f64; 4]) -> Expert {
         let mut e = Expert::with_config(task, seed, cfg);
         e.resume_from = Some(start_quat);
